@@ -1,0 +1,124 @@
+//! A tiny command-line parser (no dependency): positional arguments, `--flag`,
+//! `--key value`, `-o value`, and `--help`/`-h`. Each subcommand declares which
+//! options take a value and which are switches, so typos are errors.
+
+use point2quad::Error;
+
+/// Parsed arguments of one subcommand.
+#[derive(Debug, Default)]
+pub struct Args {
+    pub positional: Vec<String>,
+    values: Vec<(String, String)>,
+    switches: Vec<String>,
+    pub help: bool,
+}
+
+/// What a subcommand accepts: option names (with leading dashes) that take a value,
+/// and those that are plain switches.
+pub struct Spec<'a> {
+    pub valued: &'a [&'a str],
+    pub switches: &'a [&'a str],
+}
+
+impl Args {
+    /// Parses `argv` (without the program and subcommand names) against `spec`.
+    pub fn parse(cmd: &str, argv: &[String], spec: &Spec) -> Result<Args, Error> {
+        let mut a = Args::default();
+        let mut i = 0;
+        while i < argv.len() {
+            let s = &argv[i];
+            if s == "-h" || s == "--help" {
+                a.help = true;
+            } else if s == "--" {
+                a.positional.extend(argv[i + 1..].iter().cloned());
+                break;
+            } else if s.starts_with('-') && s.len() > 1 {
+                let (name, inline) = match s.split_once('=') {
+                    Some((n, v)) => (n.to_string(), Some(v.to_string())),
+                    None => (s.clone(), None),
+                };
+                if spec.valued.contains(&name.as_str()) {
+                    let v = match inline {
+                        Some(v) => v,
+                        None => {
+                            i += 1;
+                            argv.get(i).cloned().ok_or_else(|| {
+                                Error::Usage(format!(
+                                    "{cmd}: option {name} needs a value (see `point2quad {cmd} --help`)"
+                                ))
+                            })?
+                        }
+                    };
+                    a.values.push((name, v));
+                } else if spec.switches.contains(&name.as_str()) && inline.is_none() {
+                    a.switches.push(name);
+                } else {
+                    return Err(Error::Usage(format!(
+                        "{cmd}: unknown option {s} (see `point2quad {cmd} --help`)"
+                    )));
+                }
+            } else {
+                a.positional.push(s.clone());
+            }
+            i += 1;
+        }
+        Ok(a)
+    }
+
+    /// The last value given for option `name`.
+    pub fn value(&self, name: &str) -> Option<&str> {
+        self.values.iter().rev().find(|(n, _)| n == name).map(|(_, v)| v.as_str())
+    }
+
+    /// The value of `name` parsed as `T`, or `default` when absent.
+    pub fn parsed<T: std::str::FromStr>(&self, cmd: &str, name: &str, default: T) -> Result<T, Error> {
+        match self.value(name) {
+            None => Ok(default),
+            Some(v) => v.parse().map_err(|_| {
+                Error::Usage(format!("{cmd}: {name}: cannot parse {v:?} (see `point2quad {cmd} --help`)"))
+            }),
+        }
+    }
+
+    /// Whether switch `name` was given.
+    pub fn switch(&self, name: &str) -> bool {
+        self.switches.iter().any(|s| s == name)
+    }
+
+    /// Exactly `n` positional arguments, else a usage error naming `what`.
+    pub fn expect_positional(&self, cmd: &str, n: usize, what: &str) -> Result<&[String], Error> {
+        if self.positional.len() != n {
+            return Err(Error::Usage(format!(
+                "{cmd}: expected {what}, got {} argument(s) (see `point2quad {cmd} --help`)",
+                self.positional.len()
+            )));
+        }
+        Ok(&self.positional)
+    }
+
+    /// A required option's value.
+    pub fn required(&self, cmd: &str, name: &str) -> Result<&str, Error> {
+        self.value(name)
+            .ok_or_else(|| Error::Usage(format!("{cmd}: missing {name} (see `point2quad {cmd} --help`)")))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    fn v(s: &[&str]) -> Vec<String> {
+        s.iter().map(|x| x.to_string()).collect()
+    }
+    #[test]
+    fn parses_values_switches_and_rejects_unknown() {
+        let spec = Spec { valued: &["-o", "--seed"], switches: &["--json"] };
+        let a = Args::parse("x", &v(&["in.xyz", "-o", "out.obj", "--seed=3", "--json"]), &spec).unwrap();
+        assert_eq!(a.positional, vec!["in.xyz"]);
+        assert_eq!(a.value("-o"), Some("out.obj"));
+        assert_eq!(a.parsed("x", "--seed", 0u64).unwrap(), 3);
+        assert!(a.switch("--json"));
+        assert!(Args::parse("x", &v(&["--bogus"]), &spec).is_err());
+        assert!(Args::parse("x", &v(&["-o"]), &spec).is_err());
+        assert!(Args::parse("x", &v(&["--seed=abc"]), &spec).unwrap().parsed("x", "--seed", 0u64).is_err());
+    }
+}

@@ -1,0 +1,11 @@
+//! `point2quad dataset` (to be written).
+
+#[allow(unused_imports)]
+use crate::args::Args;
+use point2quad::{Error, Result};
+
+pub const HELP: &str = "point2quad dataset: not available yet";
+
+pub fn run(_args: &[String]) -> Result<()> {
+    Err(Error::Usage("point2quad dataset: not implemented yet".into()))
+}

@@ -1,0 +1,11 @@
+//! `point2quad render` (to be written).
+
+#[allow(unused_imports)]
+use crate::args::Args;
+use point2quad::{Error, Result};
+
+pub const HELP: &str = "point2quad render: not available yet";
+
+pub fn run(_args: &[String]) -> Result<()> {
+    Err(Error::Usage("point2quad render: not implemented yet".into()))
+}

@@ -1,0 +1,8 @@
+//! The Point2Quad pipeline: normalising frame, normals, candidate quads and their features, noise and datasets, the model, training and reconstruction.
+
+pub mod candidates;
+pub mod dataset;
+pub mod features;
+pub mod frame;
+pub mod noise;
+pub mod normals;

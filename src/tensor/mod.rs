@@ -1,0 +1,3 @@
+//! f32 tensors with reverse-mode automatic differentiation on a Wengert tape.
+
+pub mod tensor;

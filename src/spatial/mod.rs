@@ -2,3 +2,4 @@
 
 pub mod kdtree;
 pub mod subsample;
+pub mod neighborhoods;

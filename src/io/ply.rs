@@ -435,7 +435,7 @@ fn read_vertices(
             }
         }
         let rest = &data[*pos..];
-        let avail = if stride == 0 { el.count } else { rest.len() / stride };
+        let avail = rest.len().checked_div(stride).unwrap_or(el.count);
         let ty = |a: usize| match el.props[axis_prop[a]].kind {
             Kind::Scalar(s) => s,
             Kind::List { .. } => unreachable!("internal error: lists were rejected above"),

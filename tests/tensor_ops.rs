@@ -12,7 +12,7 @@ use proptest::prelude::*;
 use std::sync::Arc;
 
 fn cfg() -> ProptestConfig {
-    ProptestConfig::with_cases(24)
+    ProptestConfig { failure_persistence: None, ..ProptestConfig::with_cases(24) }
 }
 
 /// Shape of `b` for a broadcast kind against `[r × c]`.

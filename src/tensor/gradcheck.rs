@@ -115,7 +115,7 @@ where
             let numeric = (lp - lm) / (2.0 * h);
             let (dp, dm) = ((lp - l0) / h, (l0 - lm) / h);
             let tol = |a: f64, b: f64| cfg.atol + cfg.rtol * a.abs().max(b.abs());
-            if (dp - dm).abs() > 4.0 * tol(dp, dm) {
+            if (dp - dm).abs() > tol(dp, dm) {
                 rep.skipped += 1;
                 continue;
             }

@@ -128,9 +128,12 @@ impl<'a> Reader<'a> {
         }
         let left = (self.b.len() - self.pos) as u64;
         if numel.saturating_mul(4) > left {
-            return Err(self.err(format!("tensor '{name}' {dims:?} needs {} bytes, {left} left", numel * 4)));
+            return Err(self.err(format!("tensor '{name}' {dims:?} needs {} bytes, {left} left", numel.saturating_mul(4))));
         }
-        let dims: Vec<usize> = dims.iter().map(|&d| d as usize).collect();
+        let dims: Vec<usize> = dims
+            .iter()
+            .map(|&d| usize::try_from(d).map_err(|_| self.err(format!("tensor '{name}' dimension {d} too large"))))
+            .collect::<Result<_>>()?;
         let bytes = self.take(numel as usize * 4, "tensor data")?;
         let mut data = vec![0.0f32; numel as usize];
         // Copy into an aligned buffer (the file offset may be unaligned), then fix endianness.

@@ -6,3 +6,6 @@ pub mod features;
 pub mod frame;
 pub mod noise;
 pub mod normals;
+pub mod model;
+pub mod reconstruct;
+pub mod train;

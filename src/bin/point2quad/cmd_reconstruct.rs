@@ -1,11 +1,94 @@
-//! `point2quad reconstruct` (to be written).
+//! `point2quad reconstruct`: point cloud in, manifold pure-quad mesh out.
 
-#[allow(unused_imports)]
-use crate::args::Args;
+use crate::args::{Args, Spec};
+use point2quad::io::mesh_io::write_mesh;
+use point2quad::io::points::read_points;
+use point2quad::mesh::poly::PolyMesh;
+use point2quad::pipeline::model::Model;
+use point2quad::pipeline::reconstruct::{reconstruct_with_report, ReconstructConfig};
 use point2quad::{Error, Result};
+use std::path::{Path, PathBuf};
 
-pub const HELP: &str = "point2quad reconstruct: not available yet";
+pub const HELP: &str = "\
+point2quad reconstruct: point cloud -> pure-quad manifold mesh
 
-pub fn run(_args: &[String]) -> Result<()> {
-    Err(Error::Usage("point2quad reconstruct: not implemented yet".into()))
+USAGE:
+    point2quad reconstruct INPUT -o OUT.{obj,ply,off} [OPTIONS]
+
+INPUT is a point cloud (.xyz/.txt/.pts, .ply, .obj or .off; only positions are
+read), at any scale, pose or offset. The output mesh's vertices are the input points,
+written back exactly and in input order (points no face uses stay as isolated
+vertices), then any vertices hole filling added.
+
+OPTIONS:
+    -o, --output OUT      output mesh; format from the extension (required)
+    --model FILE          weights written by `point2quad train` [the shipped weights]
+    --svg PREVIEW.svg     also write a shaded SVG picture of the result
+    --no-postprocess      write the faces the network predicts, unrepaired
+                          (may be non-manifold: the paper's raw output)
+    --threshold T         probability above which a candidate is kept [0.5]
+    --k K                 neighbours searched per point for candidates
+";
+
+const SPEC: Spec = Spec {
+    valued: &["-o", "--output", "--model", "--svg", "--threshold", "--k"],
+    switches: &["--no-postprocess"],
+};
+
+/// The weights shipped with the project (`make train` writes them).
+pub fn shipped_model() -> Result<Model> {
+    let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/point2quad-default.p2qm"));
+    Model::load(path)
+}
+
+pub fn run(argv: &[String]) -> Result<()> {
+    let cmd = "reconstruct";
+    let a = Args::parse(cmd, argv, &SPEC)?;
+    let input = PathBuf::from(&a.expect_positional(cmd, 1, "one INPUT point cloud")?[0]);
+    let out = PathBuf::from(a.value("-o").or(a.value("--output")).ok_or_else(|| {
+        Error::Usage(format!("{cmd}: missing -o OUT.{{obj,ply,off}} (see `point2quad {cmd} --help`)"))
+    })?);
+    let mut cfg = ReconstructConfig { run_postprocess: !a.switch("--no-postprocess"), ..Default::default() };
+    cfg.threshold = a.parsed(cmd, "--threshold", cfg.threshold)?;
+    cfg.candidates.k = a.parsed(cmd, "--k", cfg.candidates.k)?;
+    // Check the output format before the work, not after it.
+    point2quad::io::mesh_io::MeshFormat::from_path(&out)?;
+    let t0 = std::time::Instant::now();
+    let points = read_points(&input)?;
+    let t_read = t0.elapsed().as_secs_f64();
+    let model = match a.value("--model") {
+        Some(m) => Model::load(Path::new(m))?,
+        None => shipped_model()?,
+    };
+    let (mesh, rep) = reconstruct_with_report(&points, &model, &cfg)?;
+    let t1 = std::time::Instant::now();
+    let poly = PolyMesh::from(&mesh);
+    write_mesh(&out, &poly)?;
+    if let Some(svg) = a.value("--svg") {
+        point2quad::io::svg::write_svg(Path::new(svg), &poly, &point2quad::io::svg::RenderOptions::default())?;
+    }
+    let t_write = t1.elapsed().as_secs_f64();
+    let stages: Vec<String> = std::iter::once(("read", t_read))
+        .chain(rep.timings.iter().copied())
+        .chain(std::iter::once(("write", t_write)))
+        .map(|(n, s)| format!("{n} {:.0} ms", s * 1e3))
+        .collect();
+    let (filled, refused) = rep
+        .postprocess
+        .as_ref()
+        .map(|p| (p.hole_fill.quads_added(), p.refused_on_insertion + p.removed_by_score))
+        .unwrap_or((0, 0));
+    eprintln!(
+        "reconstruct: {} points, {} candidates, {} predicted real, {} faces kept ({} removed/refused), {} hole quads filled ({} new vertices) -> {}",
+        rep.points,
+        rep.candidates,
+        rep.predicted,
+        rep.faces,
+        refused,
+        filled,
+        rep.vertices_added,
+        out.display()
+    );
+    eprintln!("reconstruct: time: {} (total {:.0} ms)", stages.join(", "), t0.elapsed().as_secs_f64() * 1e3);
+    Ok(())
 }

@@ -27,6 +27,11 @@ pub struct HoleFillConfig {
     pub min_scaled_jacobian: f64,
     /// Minimum dot product of a filling quad's unit normal with each neighbour's.
     pub min_normal_dot: f64,
+    /// Pattern 1 (a 4-edge loop) uses these looser bounds: the four corners are given, so
+    /// only a twisted or folded quad is refused (a hole across a sharp edge must close).
+    pub loop4_min_scaled_jacobian: f64,
+    /// See `loop4_min_scaled_jacobian`.
+    pub loop4_min_normal_dot: f64,
     /// Pattern 3 reuses an isolated vertex within this fraction of the corner's mean
     /// edge length from the parallelogram point instead of adding a vertex.
     pub snap_radius: f64,
@@ -43,6 +48,8 @@ impl Default for HoleFillConfig {
             right_angle_tol_deg: 35.0,
             min_scaled_jacobian: 0.3,
             min_normal_dot: 0.3,
+            loop4_min_scaled_jacobian: 0.0,
+            loop4_min_normal_dot: -0.3,
             snap_radius: 0.35,
             smoothing_steps: 3,
             max_steps_per_edge: 2,
@@ -159,14 +166,19 @@ impl Filler<'_> {
 
     /// Scaled Jacobian of the quad if it passes the shape and normal checks.
     fn quad_quality(&self, p: &[[f64; 3]; 4], neighbours: &[HalfedgeId]) -> Option<f64> {
+        let (min_sj, min_dot) = if neighbours.len() == 4 {
+            (self.cfg.loop4_min_scaled_jacobian, self.cfg.loop4_min_normal_dot)
+        } else {
+            (self.cfg.min_scaled_jacobian, self.cfg.min_normal_dot)
+        };
         let sj = scaled_jacobian(p);
-        if sj < self.cfg.min_scaled_jacobian {
+        if sj < min_sj {
             return None;
         }
         let n = quad_normal(p)?;
         for &h in neighbours {
             if let Some(m) = self.face_normal_across(h) {
-                if dot(n, m) < self.cfg.min_normal_dot {
+                if dot(n, m) < min_dot {
                     return None;
                 }
             }

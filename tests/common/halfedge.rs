@@ -172,3 +172,63 @@ pub fn random_soup(m: &TestMesh, rng: &mut Rng, drop: f64, wrong: usize) -> (Vec
     rng.shuffle(&mut faces);
     (faces.iter().map(|x| x.0).collect(), faces.iter().map(|x| x.1).collect())
 }
+
+/// The shared mesh folder (`../shared/data/quads/<sub>`), or `None` (with a message) when
+/// it is absent so that the caller can skip.
+pub fn shared_meshes(sub: &str) -> Option<Vec<std::path::PathBuf>> {
+    // From the main checkout the data is at ../shared; from a worktree under wt/, ../../shared.
+    let main = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/quads"));
+    let wt = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/quads"));
+    let dir = if main.is_dir() { main } else { wt }.join(sub);
+    let Ok(rd) = std::fs::read_dir(&dir) else {
+        eprintln!("skipping: {} not found", dir.display());
+        return None;
+    };
+    let mut v: Vec<_> = rd
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| matches!(p.extension().and_then(|e| e.to_str()), Some("obj" | "off" | "ply")))
+        .collect();
+    v.sort();
+    Some(v)
+}
+
+/// Minimal OBJ/OFF reader (positions and polygon faces) for the measurement tests.
+pub fn read_poly(path: &std::path::Path) -> (Vec<[f64; 3]>, Vec<Vec<u32>>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut vs = Vec::new();
+    let mut fs = Vec::new();
+    if path.extension().and_then(|e| e.to_str()) == Some("off") {
+        let mut nums = text.lines().filter(|l| !l.trim().is_empty() && !l.starts_with('#')).skip(1);
+        let counts: Vec<usize> = nums.next().unwrap().split_whitespace().map(|x| x.parse().unwrap()).collect();
+        for _ in 0..counts[0] {
+            let p: Vec<f64> = nums.next().unwrap().split_whitespace().map(|x| x.parse().unwrap()).collect();
+            vs.push([p[0], p[1], p[2]]);
+        }
+        for _ in 0..counts[1] {
+            let f: Vec<u32> = nums.next().unwrap().split_whitespace().map(|x| x.parse().unwrap()).collect();
+            fs.push(f[1..1 + f[0] as usize].to_vec());
+        }
+    } else {
+        for l in text.lines() {
+            let mut it = l.split_whitespace();
+            match it.next() {
+                Some("v") => {
+                    let p: Vec<f64> = it.take(3).map(|x| x.parse().unwrap()).collect();
+                    vs.push([p[0], p[1], p[2]]);
+                }
+                Some("f") => {
+                    let n = vs.len() as i64;
+                    fs.push(
+                        it.map(|t| {
+                            let i: i64 = t.split('/').next().unwrap().parse().unwrap();
+                            (if i < 0 { n + i } else { i - 1 }) as u32
+                        })
+                        .collect(),
+                    );
+                }
+                _ => {}
+            }
+        }
+    }
+    (vs, fs)
+}

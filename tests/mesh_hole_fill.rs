@@ -9,6 +9,7 @@ mod common;
 use std::collections::HashSet;
 
 use common::*;
+use point2quad::io::mesh_io::read_mesh;
 use point2quad::mesh::halfedge::HalfedgeMesh;
 use point2quad::mesh::handles::{FaceId, HalfedgeId};
 use point2quad::mesh::hole_fill::{fill_holes, HoleFillConfig};
@@ -111,7 +112,15 @@ fn run_one(full: &HalfedgeMesh, positions: &[[f64; 3]], rate: f64, seed: u64) ->
             }
         }
     }
-    Row { removed: removed.len(), wt_before, wt_after: watertightness(&h), added: added.len(), restored, singles, singles_closed }
+    Row {
+        removed: removed.len(),
+        wt_before,
+        wt_after: watertightness(&h),
+        added: added.len(),
+        restored,
+        singles,
+        singles_closed,
+    }
 }
 
 #[test]
@@ -131,13 +140,25 @@ fn measure(sub: &str) {
     let Some(paths) = shared_meshes(sub) else { return };
     println!(
         "{:<22} {:>6} {:>5} {:>7} {:>8} {:>8} {:>8} {:>6} {:>9} {:>9} {:>8}",
-        "mesh", "faces", "rate", "removed", "wt_orig", "wt_hole", "wt_fill", "added", "rest/add", "rest/rem", "singles"
+        "mesh",
+        "faces",
+        "rate",
+        "removed",
+        "wt_orig",
+        "wt_hole",
+        "wt_fill",
+        "added",
+        "rest/add",
+        "rest/rem",
+        "singles"
     );
     let mut totals = [[0.0f64; 6]; 3];
     let mut all_singles = (0, 0);
     for path in &paths {
-        let (vertices, faces) = read_poly(path);
-        let quads: Vec<[u32; 4]> = faces.iter().filter(|f| f.len() == 4).map(|f| [f[0], f[1], f[2], f[3]]).collect();
+        let pm = read_mesh(path).unwrap();
+        let vertices = pm.vertices;
+        let quads: Vec<[u32; 4]> =
+            pm.faces.iter().filter(|f| f.len() == 4).map(|f| [f[0], f[1], f[2], f[3]]).collect();
         let mut full = HalfedgeMesh::new(vertices.len());
         let order: Vec<usize> = (0..quads.len()).collect();
         full.insert_faces(&quads, &order);

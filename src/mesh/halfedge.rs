@@ -467,7 +467,10 @@ impl HalfedgeMesh {
             let mut k = self.face_vertices(g).map(|v| v.0);
             k.sort_unstable();
             if k == key {
-                return Self::refuse(RefusalKind::Duplicate, format!("quad {:?} duplicates {g}", vs.map(|v| v.0)));
+                return Self::refuse(
+                    RefusalKind::Duplicate,
+                    format!("quad {:?} duplicates {g}", vs.map(|v| v.0)),
+                );
             }
         }
         // Vertices: the quad must attach to the single fan of each corner, or the corner is isolated.
@@ -484,7 +487,9 @@ impl HalfedgeMesh {
             if !e_in && !e_out {
                 return Self::refuse(
                     RefusalKind::SecondFan(v),
-                    format!("{v} already has a fan of faces the quad does not attach to (non-manifold vertex)"),
+                    format!(
+                        "{v} already has a fan of faces the quad does not attach to (non-manifold vertex)"
+                    ),
                 );
             }
         }
@@ -611,7 +616,8 @@ impl HalfedgeMesh {
                 self.is_boundary(h).then(|| (v, self.prev(h).opposite()))
             })
             .collect();
-        let mut upd: Vec<(HalfedgeId, HalfedgeId, HalfedgeId, Option<FaceId>)> = Vec::with_capacity(edges.len() * 2);
+        let mut upd: Vec<(HalfedgeId, HalfedgeId, HalfedgeId, Option<FaceId>)> =
+            Vec::with_capacity(edges.len() * 2);
         for &e in &edges {
             for x in [HalfedgeId(2 * e as u32), HalfedgeId(2 * e as u32 + 1)] {
                 upd.push((x.opposite(), self.prev(x).opposite(), self.next(x).opposite(), self.face(x)));

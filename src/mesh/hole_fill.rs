@@ -89,7 +89,11 @@ struct IsolatedGrid {
 
 impl IsolatedGrid {
     fn key(&self, p: [f64; 3]) -> (i64, i64, i64) {
-        ((p[0] / self.cell).floor() as i64, (p[1] / self.cell).floor() as i64, (p[2] / self.cell).floor() as i64)
+        (
+            (p[0] / self.cell).floor() as i64,
+            (p[1] / self.cell).floor() as i64,
+            (p[2] / self.cell).floor() as i64,
+        )
     }
     fn nearest(&self, p: [f64; 3], radius: f64, pos: &[[f64; 3]], mesh: &HalfedgeMesh) -> Option<u32> {
         let k = self.key(p);
@@ -237,7 +241,8 @@ impl Filler<'_> {
                     let quad = [from(k), from(k + 1), from(k + 2), from(k + 3)];
                     let nb = [lp[k], lp[(k + 1) % l], lp[(k + 2) % l]];
                     if let Some(score) = self.quad_quality(&quad.map(p), &nb) {
-                        let c = Candidate { quad, new_pos: None, pattern: 2, score, anchor: (quad[0], quad[3]) };
+                        let c =
+                            Candidate { quad, new_pos: None, pattern: 2, score, anchor: (quad[0], quad[3]) };
                         if better(&c, &best) {
                             best = Some(c);
                         }

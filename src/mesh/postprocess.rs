@@ -29,7 +29,12 @@ pub struct PostprocessConfig {
 
 impl Default for PostprocessConfig {
     fn default() -> Self {
-        PostprocessConfig { score_limit: 2, score_filter: true, fill_holes: true, hole_fill: HoleFillConfig::default() }
+        PostprocessConfig {
+            score_limit: 2,
+            score_filter: true,
+            fill_holes: true,
+            hole_fill: HoleFillConfig::default(),
+        }
     }
 }
 
@@ -63,7 +68,11 @@ pub fn face_score(boundary_edges: usize, nonmanifold_edges: usize) -> u32 {
 /// Checks faces and probabilities: lengths agree, indices in range, probabilities finite.
 fn check_inputs(n_vertices: usize, faces: &[[u32; 4]], probs: &[f32]) -> Result<()> {
     if probs.len() != faces.len() {
-        return Err(Error::invalid(format!("postprocess: {} probabilities for {} faces", probs.len(), faces.len())));
+        return Err(Error::invalid(format!(
+            "postprocess: {} probabilities for {} faces",
+            probs.len(),
+            faces.len()
+        )));
     }
     for (i, f) in faces.iter().enumerate() {
         if let Some(v) = f.iter().find(|&&v| v as usize >= n_vertices) {
@@ -177,7 +186,11 @@ pub fn insertion_order(probs: &[f32], keep: &[bool]) -> Vec<usize> {
 
 /// Step (b): inserts `faces[order[..]]` into a fresh mesh of `n_vertices` vertices,
 /// refusing what would break manifoldness (see [`HalfedgeMesh::insert_faces`]).
-pub fn insert_by_priority(n_vertices: usize, faces: &[[u32; 4]], order: &[usize]) -> (HalfedgeMesh, InsertOutcome) {
+pub fn insert_by_priority(
+    n_vertices: usize,
+    faces: &[[u32; 4]],
+    order: &[usize],
+) -> (HalfedgeMesh, InsertOutcome) {
     let mut mesh = HalfedgeMesh::new(n_vertices);
     let out = mesh.insert_faces(faces, order);
     (mesh, out)

@@ -5,6 +5,8 @@
 use std::collections::HashMap;
 
 use point2quad::mesh::halfedge::HalfedgeMesh;
+use point2quad::mesh::poly::QuadMesh;
+use point2quad::mesh::shapes;
 use point2quad::rng::Rng;
 
 /// A test mesh: positions, quads, and what its topology must be.
@@ -106,11 +108,36 @@ pub fn genus2() -> TestMesh {
     voxels("genus2", &cells, 2)
 }
 
-/// The suite: open grid, closed box, torus, genus 2.
+/// A test mesh from a generated [`QuadMesh`]; closedness and genus by brute force over a
+/// map of undirected edges (independent of the half-edge code).
+pub fn from_shape(name: &'static str, q: QuadMesh) -> TestMesh {
+    let mut edges: HashMap<(u32, u32), usize> = HashMap::new();
+    for f in &q.quads {
+        for i in 0..4 {
+            let (a, b) = (f[i], f[(i + 1) % 4]);
+            *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+        }
+    }
+    let closed = edges.values().all(|&c| c == 2);
+    let used: std::collections::HashSet<u32> = q.quads.iter().flatten().copied().collect();
+    let chi = used.len() as i64 - edges.len() as i64 + q.quads.len() as i64;
+    // Generated closed shapes are one connected surface: genus = (2 − χ)/2.
+    let genus = if closed { ((2 - chi) / 2) as usize } else { 0 };
+    TestMesh { name, positions: q.vertices, quads: q.quads, closed, genus }
+}
+
+/// The suite: open grid and tube, closed cube-sphere, torus, a random voxel cage (any
+/// genus), the genus-2 plate.
 pub fn suite() -> Vec<TestMesh> {
-    let mut g = grid(5, 4);
-    g.name = "grid5x4";
-    vec![g, box_mesh(), torus(), genus2()]
+    let mut rng = Rng::new(7);
+    vec![
+        from_shape("grid", shapes::grid(5, 4, 1.0, 0.8)),
+        from_shape("tube", shapes::cylinder(8, 3, 1.0, 1.0, false)),
+        from_shape("cube_sphere", shapes::cube_sphere(3)),
+        from_shape("torus", shapes::torus(8, 6, 2.0, 0.7)),
+        from_shape("voxel_cage", shapes::voxel_cage(&mut rng, [4, 4, 3], 0.5)),
+        genus2(),
+    ]
 }
 
 /// A face's vertex set, sorted (orientation- and rotation-free identity).
@@ -190,45 +217,4 @@ pub fn shared_meshes(sub: &str) -> Option<Vec<std::path::PathBuf>> {
         .collect();
     v.sort();
     Some(v)
-}
-
-/// Minimal OBJ/OFF reader (positions and polygon faces) for the measurement tests.
-pub fn read_poly(path: &std::path::Path) -> (Vec<[f64; 3]>, Vec<Vec<u32>>) {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut vs = Vec::new();
-    let mut fs = Vec::new();
-    if path.extension().and_then(|e| e.to_str()) == Some("off") {
-        let mut nums = text.lines().filter(|l| !l.trim().is_empty() && !l.starts_with('#')).skip(1);
-        let counts: Vec<usize> = nums.next().unwrap().split_whitespace().map(|x| x.parse().unwrap()).collect();
-        for _ in 0..counts[0] {
-            let p: Vec<f64> = nums.next().unwrap().split_whitespace().map(|x| x.parse().unwrap()).collect();
-            vs.push([p[0], p[1], p[2]]);
-        }
-        for _ in 0..counts[1] {
-            let f: Vec<u32> = nums.next().unwrap().split_whitespace().map(|x| x.parse().unwrap()).collect();
-            fs.push(f[1..1 + f[0] as usize].to_vec());
-        }
-    } else {
-        for l in text.lines() {
-            let mut it = l.split_whitespace();
-            match it.next() {
-                Some("v") => {
-                    let p: Vec<f64> = it.take(3).map(|x| x.parse().unwrap()).collect();
-                    vs.push([p[0], p[1], p[2]]);
-                }
-                Some("f") => {
-                    let n = vs.len() as i64;
-                    fs.push(
-                        it.map(|t| {
-                            let i: i64 = t.split('/').next().unwrap().parse().unwrap();
-                            (if i < 0 { n + i } else { i - 1 }) as u32
-                        })
-                        .collect(),
-                    );
-                }
-                _ => {}
-            }
-        }
-    }
-    (vs, fs)
 }

@@ -691,8 +691,7 @@ impl HalfedgeMesh {
         }
         // A corner whose fan was closed keeps a non-boundary outgoing half-edge; one whose
         // stored half-edge just became interior needs any outgoing half-edge still boundary.
-        for i in 0..4 {
-            let v = q[i];
+        for v in q {
             if let Some(h) = self.v_out[v.idx()] {
                 if !self.is_boundary(h) {
                     if let Some(b) = self.vertex_outgoing(v).find(|&x| self.is_boundary(x)) {

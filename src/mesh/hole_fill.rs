@@ -386,9 +386,9 @@ pub fn fill_holes(
     }
     let cell = if edge_n > 0 && edge_sum > 0.0 { edge_sum / edge_n as f64 } else { 1.0 };
     let mut grid = IsolatedGrid { cell, cells: HashMap::new() };
-    for v in 0..mesh.n_vertices() {
+    for (v, &p) in positions.iter().enumerate() {
         if mesh.is_isolated(VertexId(v as u32)) {
-            let k = grid.key(positions[v]);
+            let k = grid.key(p);
             grid.cells.entry(k).or_default().push(v as u32);
         }
     }

@@ -27,8 +27,10 @@ pub struct HoleFillConfig {
     pub min_scaled_jacobian: f64,
     /// Minimum dot product of a filling quad's unit normal with each neighbour's.
     pub min_normal_dot: f64,
-    /// Pattern 1 (a 4-edge loop) uses these looser bounds: the four corners are given, so
-    /// only a twisted or folded quad is refused (a hole across a sharp edge must close).
+    /// Pattern 1 (a 4-edge loop) uses these bounds; the defaults (−1) accept any quad
+    /// `add_face` accepts: the four corners are given, and a single-face hole must close
+    /// even on spiky or twisted geometry. (A lone quad's own border is refused by
+    /// `add_face` as a duplicate.)
     pub loop4_min_scaled_jacobian: f64,
     /// See `loop4_min_scaled_jacobian`.
     pub loop4_min_normal_dot: f64,
@@ -41,16 +43,19 @@ pub struct HoleFillConfig {
     pub max_steps_per_edge: usize,
 }
 
+/// Defaults tuned on `train/` (remove 1–5% of faces, fill, compare): the normal bound is
+/// loose because sharp-featured meshes need fills across creases; folds (normals near
+/// opposite) and inverted quads are still refused.
 impl Default for HoleFillConfig {
     fn default() -> Self {
         HoleFillConfig {
             max_hole_edges: 40,
-            right_angle_tol_deg: 35.0,
+            right_angle_tol_deg: 45.0,
             min_scaled_jacobian: 0.3,
-            min_normal_dot: 0.3,
+            min_normal_dot: -0.3,
             loop4_min_scaled_jacobian: -1.0,
             loop4_min_normal_dot: -1.0,
-            snap_radius: 0.35,
+            snap_radius: 0.5,
             smoothing_steps: 3,
             max_steps_per_edge: 2,
         }

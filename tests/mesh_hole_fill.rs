@@ -11,7 +11,7 @@ use std::collections::HashSet;
 use common::*;
 use point2quad::io::mesh_io::read_mesh;
 use point2quad::mesh::halfedge::HalfedgeMesh;
-use point2quad::mesh::handles::{FaceId, HalfedgeId};
+use point2quad::mesh::handles::{FaceId, HalfedgeId, VertexId};
 use point2quad::mesh::hole_fill::{fill_holes, HoleFillConfig};
 use point2quad::mesh::validate::validate;
 use point2quad::rng::Rng;
@@ -46,7 +46,9 @@ struct Row {
     singles_closed: usize,
 }
 
-fn run_one(full: &HalfedgeMesh, positions: &[[f64; 3]], rate: f64, seed: u64) -> Row {
+/// `keep_points`: the removed patches' interior vertices stay available (as input points do
+/// in the pipeline); otherwise they are moved far away so that pattern 3 must invent vertices.
+fn run_one(full: &HalfedgeMesh, positions: &[[f64; 3]], rate: f64, seed: u64, keep_points: bool) -> Row {
     let mut rng = Rng::new(seed);
     let mut h = full.clone();
     let target = ((rate * full.n_faces() as f64).round() as usize).max(1);
@@ -85,6 +87,13 @@ fn run_one(full: &HalfedgeMesh, positions: &[[f64; 3]], rate: f64, seed: u64) ->
     let wt_before = watertightness(&h);
     let faces_before: HashSet<[u32; 4]> = mesh_keys(&h).into_iter().collect();
     let mut pos = positions.to_vec();
+    if !keep_points {
+        for (v, p) in pos.iter_mut().enumerate() {
+            if h.is_isolated(VertexId(v as u32)) && !full.is_isolated(VertexId(v as u32)) {
+                *p = [1e9 + v as f64, 1e9, 1e9];
+            }
+        }
+    }
     fill_holes(&mut h, &mut pos, &HoleFillConfig::default()).unwrap();
     validate(&h).unwrap();
     let after: HashSet<[u32; 4]> = mesh_keys(&h).into_iter().collect();
@@ -98,7 +107,7 @@ fn run_one(full: &HalfedgeMesh, positions: &[[f64; 3]], rate: f64, seed: u64) ->
         let f = p[0];
         let interior = (0..4).all(|i| {
             let (a, b) = (f[i], f[(i + 1) % 4]);
-            full.find_halfedge(point2quad::mesh::handles::VertexId(a), point2quad::mesh::handles::VertexId(b))
+            full.find_halfedge(VertexId(a), VertexId(b))
                 .is_some_and(|x| !full.is_boundary(x) && !full.is_boundary(x.opposite()))
         });
         let lonely = patches.iter().filter(|q| !std::ptr::eq(*q, p)).flatten().all(|g| {
@@ -153,6 +162,7 @@ fn measure(sub: &str) {
         "singles"
     );
     let mut totals = [[0.0f64; 6]; 3];
+    let mut totals_no_points = [[0.0f64; 6]; 3];
     let mut all_singles = (0, 0);
     for path in &paths {
         let pm = read_mesh(path).unwrap();
@@ -165,7 +175,17 @@ fn measure(sub: &str) {
         let wt_orig = watertightness(&full);
         let name = path.file_stem().unwrap().to_string_lossy().to_string();
         for (ri, rate) in [0.01, 0.02, 0.05].into_iter().enumerate() {
-            let r = run_one(&full, &vertices, rate, 1000 + ri as u64);
+            let r = run_one(&full, &vertices, rate, 1000 + ri as u64, true);
+            let r2 = run_one(&full, &vertices, rate, 1000 + ri as u64, false);
+            let t = &mut totals_no_points[ri];
+            t[0] += wt_orig;
+            t[1] += r2.wt_before;
+            t[2] += r2.wt_after;
+            t[3] += r2.restored as f64 / r2.added.max(1) as f64;
+            t[4] += r2.restored as f64 / r2.removed.max(1) as f64;
+            t[5] += 1.0;
+            all_singles.0 += r2.singles_closed;
+            all_singles.1 += r2.singles;
             println!(
                 "{:<22} {:>6} {:>4.0}% {:>7} {:>8.4} {:>8.4} {:>8.4} {:>6} {:>9.3} {:>9.3} {:>4}/{:<4}",
                 name,
@@ -192,17 +212,19 @@ fn measure(sub: &str) {
             all_singles.1 += r.singles;
         }
     }
-    for (ri, rate) in [1, 2, 5].into_iter().enumerate() {
-        let t = totals[ri];
-        let n = t[5].max(1.0);
-        println!(
-            "MEAN rate {rate}%: wt_orig {:.4} wt_hole {:.4} wt_fill {:.4} restored/added {:.3} restored/removed {:.3}",
+    for (label, totals) in [("interior points kept", totals), ("interior points removed", totals_no_points)] {
+        for (ri, rate) in [1, 2, 5].into_iter().enumerate() {
+            let t = totals[ri];
+            let n = t[5].max(1.0);
+            println!(
+            "MEAN {label}, rate {rate}%: wt_orig {:.4} wt_hole {:.4} wt_fill {:.4} restored/added {:.3} restored/removed {:.3}",
             t[0] / n,
             t[1] / n,
             t[2] / n,
             t[3] / n,
             t[4] / n
         );
+        }
     }
     println!("single-face holes closed: {}/{}", all_singles.0, all_singles.1);
     assert_eq!(all_singles.0, all_singles.1, "every single-face hole must close");

@@ -15,9 +15,12 @@ use crate::error::{Error, Result};
 /// Settings of the post-process.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PostprocessConfig {
-    /// Faces scoring above this are deleted by step (a); the paper uses 2 (it deletes
-    /// faces with a non-manifold edge or with two or more boundary edges). 10 deletes
-    /// only faces with a non-manifold edge, which leaves open surfaces intact.
+    /// Faces scoring above this are deleted by step (a). The paper uses 2: it deletes faces
+    /// with a non-manifold edge and also faces with two or more boundary edges, so every
+    /// hole grows to its bounding "rectangle" and nearby holes merge; measured on a
+    /// cube-sphere of 21,600 quads with 5% of the faces missing, limit 2 deleted every face.
+    /// The default, 10, deletes only faces with a non-manifold edge (same scores and order
+    /// otherwise); holes are left to step (c).
     pub score_limit: u32,
     /// Whether step (a) runs at all.
     pub score_filter: bool,
@@ -30,7 +33,7 @@ pub struct PostprocessConfig {
 impl Default for PostprocessConfig {
     fn default() -> Self {
         PostprocessConfig {
-            score_limit: 2,
+            score_limit: 10,
             score_filter: true,
             fill_holes: true,
             hole_fill: HoleFillConfig::default(),

@@ -16,7 +16,7 @@ USAGE:
     point2quad repair MESH -o OUT.{obj,ply,off} [OPTIONS]
 
 MESH is an .obj, .off or .ply file whose faces may overlap, repeat or be non-manifold.
-Steps: (a) the paper's filter deletes the worst-scoring faces while any face scores above
+Steps: (a) the paper's filter deletes the worst-scoring face while any face scores above
 the limit (score (boundary edges + 1)(10 non-manifold edges + 1)); (b) the survivors are
 inserted by priority, refusing any face that would break manifoldness (opposite-oriented
 patches are flipped to agree); (c) greedy hole filling. Output vertices are the input's,
@@ -27,9 +27,9 @@ OPTIONS:
     --drop-non-quads       drop faces that are not quads (default: error naming the first)
     --priority P           order (default): earlier faces win ties and go in first;
                            uniform: all faces equal (ties broken by index)
-    --score-limit N        delete faces scoring above N (default 2, the paper's rule; it also
-                           erodes the border of open surfaces: use 10 to delete only faces on
-                           non-manifold edges)
+    --score-limit N        delete faces scoring above N (default 10: faces on non-manifold
+                           edges; 2 is the paper's rule, which also deletes faces with two or
+                           more boundary edges and so erodes open borders and clustered holes)
     --no-filter            skip step (a)
     --no-fill              skip step (c)
     --max-hole-edges N     leave boundary loops longer than N open (default 40)
@@ -47,7 +47,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     // Fail on a bad output extension before doing any work.
     MeshFormat::from_path(Path::new(output))?;
     let mut cfg = PostprocessConfig {
-        score_limit: a.parsed("repair", "--score-limit", 2u32)?,
+        score_limit: a.parsed("repair", "--score-limit", PostprocessConfig::default().score_limit)?,
         score_filter: !a.switch("--no-filter"),
         fill_holes: !a.switch("--no-fill"),
         ..Default::default()

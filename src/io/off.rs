@@ -80,8 +80,8 @@ pub(crate) fn parse_off_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
         return Err(Error::parse(name, cl, "expected the counts 'vertices faces [edges]'"));
     }
     let count = |t: &[u8], what: &str| -> Result<usize> {
-        match parse_i64(t) {
-            Some(v) if v >= 0 => Ok(v as usize),
+        match parse_i64(t).and_then(|v| usize::try_from(v).ok()) {
+            Some(v) => Ok(v),
             _ => Err(Error::parse(name, cl, format!("bad {what} count '{}'", show(t)))),
         }
     };
@@ -119,7 +119,8 @@ pub(crate) fn parse_off_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
         let mut t = Tokens::new(line);
         let ntok = t.next().unwrap_or(b"");
         let n = match parse_i64(ntok) {
-            Some(n) if n >= 3 => n as usize,
+            Some(n) if n >= 3 => usize::try_from(n)
+                .map_err(|_| Error::parse(name, ln, format!("face {i}: vertex count {n} too large")))?,
             Some(n) => {
                 return Err(Error::parse(name, ln, format!("face {i}: has {n} vertices, needs at least 3")))
             }

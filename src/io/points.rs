@@ -90,9 +90,9 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
             first = false;
             if toks.clone().next().is_none() {
                 // A lone first value: the `.pts` point count.
-                match parse_i64(t0) {
-                    Some(n) if n >= 0 => {
-                        declared = Some((n as usize, ln));
+                match parse_i64(t0).and_then(|n| usize::try_from(n).ok()) {
+                    Some(n) => {
+                        declared = Some((n, ln));
                         continue;
                     }
                     _ => {

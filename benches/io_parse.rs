@@ -1,7 +1,10 @@
 //! Mesh parsing and writing speed. Prints `bench <name> <value> ms` lines (median
 //! of 9 runs after a warm-up): a synthetic 160×160 quad grid (25,600 vertices,
 //! 25,281 quads, random full-precision coordinates) in every format, and the large
-//! shared meshes when ../shared/data/quads/large exists.
+//! shared meshes when ../shared/data/quads/large exists. On Linux each parse
+//! figure also gets a `_cpu` line: the median CPU time of the thread (from
+//! /proc/thread-self/schedstat), which stays meaningful on a loaded machine where
+//! wall-clock time does not.
 
 use point2quad::io::mesh_io::{parse_mesh, MeshFormat, PlyEncoding};
 use point2quad::io::{obj, off, ply};
@@ -10,17 +13,39 @@ use point2quad::rng::Rng;
 use std::hint::black_box;
 use std::time::Instant;
 
-fn median_ms(mut f: impl FnMut()) -> f64 {
+/// Median wall-clock and (where available) thread CPU milliseconds of `f`.
+fn median_ms(mut f: impl FnMut()) -> (f64, Option<f64>) {
     f();
-    let mut t: Vec<f64> = (0..9)
-        .map(|_| {
-            let s = Instant::now();
-            f();
-            s.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    t.sort_by(f64::total_cmp);
-    t[t.len() / 2]
+    let mut wall = Vec::new();
+    let mut cpu = Vec::new();
+    for _ in 0..9 {
+        let c0 = thread_cpu_ns();
+        let s = Instant::now();
+        f();
+        wall.push(s.elapsed().as_secs_f64() * 1e3);
+        if let (Some(a), Some(b)) = (c0, thread_cpu_ns()) {
+            cpu.push((b - a) as f64 * 1e-6);
+        }
+    }
+    let med = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let cpu = if cpu.len() == wall.len() { Some(med(cpu)) } else { None };
+    (med(wall), cpu)
+}
+
+/// Nanoseconds this thread has run on a CPU (Linux schedstat), if available.
+fn thread_cpu_ns() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    s.split_whitespace().next()?.parse().ok()
+}
+
+fn report(name: &str, (wall, cpu): (f64, Option<f64>)) {
+    println!("bench {name} {wall:.2} ms");
+    if let Some(c) = cpu {
+        println!("bench {name}_cpu {c:.2} ms");
+    }
 }
 
 fn grid(n: u32) -> PolyMesh {
@@ -61,8 +86,8 @@ fn main() {
         let r = median_ms(|| {
             black_box(parse_mesh(black_box(&buf), format, "bench").expect("parse"));
         });
-        println!("bench io_write_grid160_{name} {w:.2} ms");
-        println!("bench io_parse_grid160_{name} {r:.2} ms");
+        report(&format!("io_write_grid160_{name}"), w);
+        report(&format!("io_parse_grid160_{name}"), r);
     }
     let large = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/quads/large"));
     let Ok(dir) = std::fs::read_dir(large) else {
@@ -78,6 +103,6 @@ fn main() {
         let r = median_ms(|| {
             black_box(parse_mesh(black_box(&bytes), format, "bench").expect("parse"));
         });
-        println!("bench io_parse_{stem} {r:.2} ms");
+        report(&format!("io_parse_{stem}"), r);
     }
 }

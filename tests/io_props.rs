@@ -116,7 +116,7 @@ fn messy_obj(mesh: &PolyMesh, forms: &[u8]) -> String {
     let mut k = 0;
     // Faces using the last vertices are left out (the caller expects that).
     for f in mesh.faces.iter().filter(|f| f.iter().all(|&i| (i as usize) < split)) {
-        s.push_str("f");
+        s.push('f');
         for &i in f {
             let form = forms[k % forms.len()] % 5;
             k += 1;

@@ -751,9 +751,15 @@ pub fn random_shape_of(family: Family, rng: &mut Rng) -> QuadMesh {
                 grid(nu, nv, 1.0, aspect * nv as f64 / nu as f64)
             } else {
                 let bumps: Vec<[f64; 4]> = (0..1 + rng.below(5))
-                    .map(|_| [rng.f64(), rng.f64(), rng.uniform(0.05, 0.3), rng.uniform(-0.3, 0.3)])
+                    .map(|_| {
+                        // Height at most ~0.6 × width: slopes stay moderate, so quads are
+                        // not stretched beyond the edge ratios real meshes show (~0.2).
+                        let w = rng.uniform(0.08, 0.3);
+                        [rng.f64(), rng.f64(), w, rng.uniform(-0.6, 0.6) * w]
+                    })
                     .collect();
-                let (fx, fy, amp) = (rng.uniform(0.5, 3.0), rng.uniform(0.5, 3.0), rng.uniform(0.0, 0.1));
+                let (fx, fy) = (rng.uniform(0.5, 3.0), rng.uniform(0.5, 3.0));
+                let amp = rng.uniform(0.0, 0.4) / (std::f64::consts::TAU * fx.max(fy));
                 let mut h = height_field(nu, nv, |x, y| {
                     let mut z =
                         amp * (std::f64::consts::TAU * fx * x).sin() * (std::f64::consts::TAU * fy * y).cos();

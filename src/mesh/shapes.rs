@@ -795,8 +795,18 @@ pub fn random_shape_of(family: Family, rng: &mut Rng) -> QuadMesh {
             let nu = 24 + rng.below(52);
             let h = rng.uniform(0.5, 4.0);
             let circ = std::f64::consts::TAU / nu as f64;
-            let nv = ((h / (circ / aspect)).round() as usize).clamp(8, (4500 / nu).max(8));
-            cylinder(nu, nv, 1.0, h, family == Family::Cylinder)
+            let capped = family == Family::Cylinder;
+            // Vertices of the two caps (as `add_disk_cap` builds them) count towards the budget.
+            let (nu, caps) = if capped {
+                let (nu4, k) = (nu.div_ceil(4) * 4, nu.div_ceil(4));
+                let layers = (k as f64 * 0.35).round().max(1.0) as usize;
+                (nu4, 2 * ((k - 1) * (k - 1) + layers * nu4))
+            } else {
+                (nu, 0)
+            };
+            let max_nv = (4800usize.saturating_sub(caps) / nu).saturating_sub(1).max(8);
+            let nv = ((h / (circ / aspect)).round() as usize).clamp(8, max_nv);
+            cylinder(nu, nv, 1.0, h, capped)
         }
         Family::CageSmooth | Family::CageSharp => {
             let dims = [2 + rng.below(5), 2 + rng.below(5), 1 + rng.below(4)];

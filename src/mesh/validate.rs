@@ -253,6 +253,20 @@ mod tests {
     }
 
     #[test]
+    fn duplicate_face_pillow_is_named() {
+        // One quad whose boundary loop is turned into a second face on the same vertices:
+        // a closed two-face "pillow", consistent in every other respect.
+        let mut m = HalfedgeMesh::from_quads(4, &[[0, 1, 2, 3]]).unwrap();
+        let loops = m.boundary_loops();
+        for &h in &loops[0] {
+            m.he_face[h.idx()] = Some(FaceId(1));
+        }
+        m.f_he.push(Some(loops[0][0]));
+        m.n_live_faces += 1;
+        expect_err(&m, "duplicates another face");
+    }
+
+    #[test]
     fn two_fans_at_a_vertex_are_named() {
         // Two quads sharing only vertex 0, linked by hand (add_face refuses to build it).
         let mut m = HalfedgeMesh::new(7);

@@ -215,3 +215,28 @@ fn postprocess_recovers_the_ground_truth_from_a_noisy_soup() {
     let precision = good as f64 / qm.quads.len() as f64;
     assert!(recall >= 0.97 && precision >= 0.97, "recall {recall} precision {precision}: {rep:?}");
 }
+
+/// The borders of open surfaces (grids, height fields, tube ends of any resolution) are not
+/// holes: filling a complete open mesh adds nothing.
+#[test]
+fn open_borders_are_not_filled() {
+    use point2quad::mesh::shapes::{self, Family};
+    let mut rng = Rng::new(21);
+    let mut meshes = Vec::new();
+    for n in [4, 6, 8, 12, 16] {
+        meshes.push(("tube", shapes::cylinder(n, 3, 1.0, 1.5, false)));
+    }
+    for family in [Family::Grid, Family::HeightField, Family::Tube] {
+        for _ in 0..3 {
+            meshes.push((family.name(), shapes::random_shape_of(family, &mut rng)));
+        }
+    }
+    for (name, q) in meshes {
+        let mut h = HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).unwrap();
+        let mut pos = q.vertices.clone();
+        let r = fill_holes(&mut h, &mut pos, &HoleFillConfig::default()).unwrap();
+        // A square tube's end is a 4-edge loop, which pattern 1 always closes.
+        let expected = if name == "tube" && h.boundary_loops().iter().all(|l| l.len() == 4) { 2 } else { 0 };
+        assert_eq!(r.quads_added(), expected, "{name}: {r:?}");
+    }
+}

@@ -5,9 +5,12 @@
 //! stays manifold, and is kept only if well shaped and not folded against its neighbours.
 //!
 //! Which loops are holes: only loops of even length (an odd loop cannot be closed by
-//! quads) and at most `max_hole_edges` edges are touched, and patterns 2 and 3 need
-//! corners that are convex seen from inside the loop. The outer border of an open surface
-//! has reflex or straight corners seen from the hole side, so nothing runs away along it.
+//! quads) and at most `max_hole_edges` edges are touched; patterns 2 and 3 need corners
+//! that are convex seen from inside the loop *and* lie in the surface's tangent plane. An
+//! open surface's outer border has reflex or straight corners seen from its "hole" side,
+//! and the open end of a tube turns across the surface rather than in it, so nothing runs
+//! away along a border. A 4-edge loop is always closed (pattern 1), so a square tube's end
+//! is capped.
 
 use std::collections::HashMap;
 
@@ -27,6 +30,11 @@ pub struct HoleFillConfig {
     pub min_scaled_jacobian: f64,
     /// Minimum dot product of a filling quad's unit normal with each neighbour's.
     pub min_normal_dot: f64,
+    /// A corner counts as convex when the unit normal of the plane its two boundary edges
+    /// span agrees with the surface normal there (mean of the neighbouring faces') by at
+    /// least this much. A hole in a surface lies in the tangent plane (dot near 1); the open
+    /// end of a tube lies across it (dot near 0) and is left open.
+    pub min_corner_normal_dot: f64,
     /// Pattern 1 (a 4-edge loop) uses these bounds; the defaults (−1) accept any quad
     /// `add_face` accepts: the four corners are given, and a single-face hole must close
     /// even on spiky or twisted geometry. (A lone quad's own border is refused by
@@ -53,6 +61,7 @@ impl Default for HoleFillConfig {
             right_angle_tol_deg: 45.0,
             min_scaled_jacobian: 0.3,
             min_normal_dot: -0.3,
+            min_corner_normal_dot: 0.5,
             loop4_min_scaled_jacobian: -1.0,
             loop4_min_normal_dot: -1.0,
             snap_radius: 0.5,
@@ -214,7 +223,10 @@ impl Filler<'_> {
             (Some(x), None) | (None, Some(x)) => x,
             (None, None) => return false,
         };
-        dot(cross(sub(b, a), sub(c, b)), n) > 0.0
+        match (normalize(cross(sub(b, a), sub(c, b))), normalize(n)) {
+            (Some(t), Some(n)) => dot(t, n) >= self.cfg.min_corner_normal_dot,
+            _ => false,
+        }
     }
 
     fn walk(&self, start: HalfedgeId) -> Vec<HalfedgeId> {

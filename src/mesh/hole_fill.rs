@@ -111,7 +111,9 @@ impl IsolatedGrid {
     }
     fn nearest(&self, p: [f64; 3], radius: f64, pos: &[[f64; 3]], mesh: &HalfedgeMesh) -> Option<u32> {
         let k = self.key(p);
-        let r = (radius / self.cell).ceil() as i64;
+        // Capped so that one long edge among short ones cannot make the scan explode; beyond
+        // the cap, far candidates are simply not considered.
+        let r = ((radius / self.cell).ceil() as i64).clamp(0, 3);
         let mut best: Option<(f64, u32)> = None;
         for dx in -r..=r {
             for dy in -r..=r {

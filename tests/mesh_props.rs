@@ -240,3 +240,26 @@ fn open_borders_are_not_filled() {
         assert_eq!(r.quads_added(), expected, "{name}: {r:?}");
     }
 }
+
+/// Closed outputs face outward whatever the input orientation; open ones keep the
+/// orientation most of their input faces had.
+#[test]
+fn output_orientation_is_outward_or_as_given() {
+    let mut rng = Rng::new(8);
+    for m in suite() {
+        for flip_share in [0.0, 0.3, 0.7, 1.0] {
+            let faces: Vec<[u32; 4]> =
+                m.quads.iter().map(|&f| if rng.f64() < flip_share { reversed(f) } else { f }).collect();
+            let probs: Vec<f32> = (0..faces.len()).map(|_| rng.f32()).collect();
+            let (qm, _) = postprocess(&m.positions, &faces, &probs, &PostprocessConfig::default()).unwrap();
+            assert_eq!(qm.quads.len(), m.quads.len(), "{}", m.name);
+            // The generators give closed shapes outward and open ones a fixed orientation.
+            let want_as_gt = m.closed || flip_share < 0.5;
+            for f in &qm.quads {
+                let gt = m.quads.iter().find(|g| key(**g) == key(*f)).unwrap();
+                let as_gt = same_cycle(*f, *gt);
+                assert_eq!(as_gt, want_as_gt, "{} flip share {flip_share}", m.name);
+            }
+        }
+    }
+}

@@ -590,6 +590,33 @@ impl HalfedgeMesh {
         self.he_prev[b.idx()] = a;
     }
 
+    /// Reverses the orientation of the whole connected component containing face `f`
+    /// (a manifold stays manifold; only a whole component can be flipped consistently).
+    ///
+    /// # Errors
+    /// `Topology` when `f` is not a live face.
+    pub fn flip_component(&mut self, f: FaceId) -> Result<()> {
+        if !self.is_face_alive(f) {
+            return Err(Error::Topology(format!("flip_component: {f} is not a live face")));
+        }
+        let mut seen: HashSet<u32> = HashSet::from([f.0]);
+        let mut comp = vec![f];
+        let mut k = 0;
+        while k < comp.len() {
+            let g = comp[k];
+            k += 1;
+            for h in self.face_halfedges(g) {
+                if let Some(n) = self.face(h.opposite()) {
+                    if seen.insert(n.0) {
+                        comp.push(n);
+                    }
+                }
+            }
+        }
+        self.flip_patch(&comp);
+        Ok(())
+    }
+
     /// Reverses the orientation of the edge-connected patch `faces` (a whole component).
     /// Each edge's two half-edges swap roles: new next(opp x) = opp(prev x) and the face of
     /// x moves to opp x; boundary loops of the patch reverse with it (they only link

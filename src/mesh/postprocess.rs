@@ -11,6 +11,7 @@ use super::hole_fill::{fill_holes, HoleFillConfig, HoleFillReport};
 use super::poly::QuadMesh;
 use super::soup::FaceSoup;
 use crate::error::{Error, Result};
+use crate::math::{cross, dot};
 
 /// Settings of the post-process.
 #[derive(Clone, Debug, PartialEq)]
@@ -56,6 +57,8 @@ pub struct PostprocessReport {
     pub refused_on_insertion: usize,
     /// The hole filling's account (c); zero when it did not run.
     pub hole_fill: HoleFillReport,
+    /// Components whose orientation was reversed at the end (see [`orient_components`]).
+    pub components_flipped: usize,
     /// Faces in the output.
     pub faces_out: usize,
     /// Boundary loops left in the output.
@@ -199,8 +202,51 @@ pub fn insert_by_priority(
     (mesh, out)
 }
 
+/// Gives each connected component a meaningful orientation: a closed component faces
+/// outward (positive signed volume); an open one takes the orientation most of its inserted
+/// faces had in the input (candidates come oriented by consistently propagated normals),
+/// since insertion may have flipped patches to make them agree. Returns how many
+/// components were flipped.
+pub fn orient_components(
+    mesh: &mut HalfedgeMesh,
+    positions: &[[f64; 3]],
+    faces: &[[u32; 4]],
+    out: &InsertOutcome,
+) -> usize {
+    let mut as_given = vec![0i8; mesh.face_capacity()];
+    for (i, f) in out.inserted.iter().enumerate() {
+        let Some(f) = *f else { continue };
+        if !mesh.is_face_alive(f) {
+            continue;
+        }
+        let got = mesh.face_vertices(f).map(|v| v.0);
+        let same = (0..4).any(|k| (0..4).all(|j| got[(j + k) % 4] == faces[i][j]));
+        as_given[f.idx()] = if same { 1 } else { -1 };
+    }
+    let mut flipped = 0;
+    for comp in mesh.connected_components() {
+        let closed =
+            comp.iter().all(|&f| mesh.face_halfedges(f).iter().all(|h| !mesh.is_boundary(h.opposite())));
+        let flip = if closed {
+            let mut vol = 0.0;
+            for &f in &comp {
+                let p = mesh.face_vertices(f).map(|v| positions[v.idx()]);
+                vol += dot(p[0], cross(p[1], p[2])) + dot(p[0], cross(p[2], p[3]));
+            }
+            vol < 0.0
+        } else {
+            comp.iter().map(|f| as_given[f.idx()] as i64).sum::<i64>() < 0
+        };
+        if flip {
+            mesh.flip_component(comp[0]).expect("internal error: component face is live");
+            flipped += 1;
+        }
+    }
+    flipped
+}
+
 /// The whole post-process: (a) score filter, (b) manifold insertion by probability,
-/// (c) hole filling. The output's vertices are `positions` (bit-identical, in order)
+/// (c) hole filling, then [`orient_components`]. The output's vertices are `positions` (bit-identical, in order)
 /// followed by any vertex the hole filling added; vertices no face uses stay in place.
 ///
 /// # Errors
@@ -230,6 +276,7 @@ pub fn postprocess(
     if cfg.fill_holes {
         report.hole_fill = fill_holes(&mut mesh, &mut pos, &cfg.hole_fill)?;
     }
+    report.components_flipped = orient_components(&mut mesh, &pos, faces, &out);
     report.faces_out = mesh.n_faces();
     report.boundary_loops_out = mesh.boundary_loops().len();
     let qm = mesh.to_quad_mesh(&pos)?;

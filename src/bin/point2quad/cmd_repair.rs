@@ -19,8 +19,9 @@ MESH is an .obj, .off or .ply file whose faces may overlap, repeat or be non-man
 Steps: (a) the paper's filter deletes the worst-scoring face while any face scores above
 the limit (score (boundary edges + 1)(10 non-manifold edges + 1)); (b) the survivors are
 inserted by priority, refusing any face that would break manifoldness (opposite-oriented
-patches are flipped to agree); (c) greedy hole filling. Output vertices are the input's,
-in order and unchanged, plus any the hole filling adds.
+patches are flipped to agree); (c) greedy hole filling. Closed components are then turned
+outward. Output vertices are the input's, in order and unchanged, plus any the hole
+filling adds.
 
 OPTIONS:
     -o FILE                output mesh (.obj .ply .off), written atomically
@@ -103,6 +104,10 @@ pub fn run(argv: &[String]) -> Result<()> {
             h.vertices_reused
         );
     }
+    eprintln!(
+        "  components re-oriented (closed: outward; open: as most input faces): {}",
+        rep.components_flipped
+    );
     eprintln!(
         "  output: {} vertices, {} quads, {} boundary loops",
         out.vertices.len(),

@@ -26,8 +26,9 @@ const PAR_BUILD_MIN: usize = 16 * 1024;
 /// Queries per parallel task in the batch functions.
 const QUERY_BLOCK: usize = 512;
 
-/// Padding of a kNN key buffer before it fills: above every real key (see [`key`]).
-const SENTINEL: u64 = u64::MAX;
+/// Padding of a kNN key buffer before it fills: `key(inf, u32::MAX)`, above every real key (real
+/// indices are below `u32::MAX`), and its distance part reads back as `+inf`.
+const SENTINEL: u64 = 0x7F80_0000_FFFF_FFFF;
 
 /// Largest `k` whose search buffer lives on the stack in [`KdTree::knn`].
 const STACK_K: usize = 64;
@@ -38,6 +39,12 @@ const STACK_K: usize = 64;
 #[inline(always)]
 fn key(dist_sq: f32, index: u32) -> u64 {
     ((dist_sq.to_bits() as u64) << 32) | index as u64
+}
+
+/// The distance part of a key.
+#[inline(always)]
+fn kth_dist(key: u64) -> f32 {
+    f32::from_bits((key >> 32) as u32)
 }
 
 #[inline(always)]
@@ -364,22 +371,27 @@ impl KdTree {
     fn scan_leaf_knn(&self, leaf: usize, q: &[f32; 3], best: &mut [u64]) {
         let (s, e) = (self.leaf_start[leaf] as usize, self.leaf_start[leaf + 1] as usize);
         let (xs, ys, zs, ids) = (&self.xs[s..e], &self.ys[s..e], &self.zs[s..e], &self.idx[s..e]);
-        // Keys first, in a loop the compiler vectorises; the rare insertions after.
-        let mut keys = [0u64; BUCKET];
-        for ((((kk, &x), &y), &z), &i) in keys.iter_mut().zip(xs).zip(ys).zip(zs).zip(ids) {
-            *kk = key(dist_sq(*q, [x, y, z]), i);
+        // Distances first, in a loop the compiler vectorises; the rare insertions after.
+        let mut ds = [0.0f32; BUCKET];
+        for (((d, &x), &y), &z) in ds.iter_mut().zip(xs).zip(ys).zip(zs) {
+            *d = dist_sq(*q, [x, y, z]);
         }
         let last = best.len() - 1;
         let mut worst = best[last];
-        for &kk in &keys[..xs.len()] {
-            if kk < worst {
-                let mut pos = last;
-                while pos > 0 && kk < best[pos - 1] {
-                    best[pos] = best[pos - 1];
-                    pos -= 1;
+        let mut worst_d = kth_dist(worst);
+        for (&d, &i) in ds.iter().zip(ids) {
+            if d <= worst_d {
+                let kk = key(d, i);
+                if kk < worst {
+                    let mut pos = last;
+                    while pos > 0 && kk < best[pos - 1] {
+                        best[pos] = best[pos - 1];
+                        pos -= 1;
+                    }
+                    best[pos] = kk;
+                    worst = best[last];
+                    worst_d = kth_dist(worst);
                 }
-                best[pos] = kk;
-                worst = best[last];
             }
         }
     }

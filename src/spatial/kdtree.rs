@@ -6,7 +6,10 @@
 //!
 //! Results are exact and deterministic: squared distances are computed by [`dist_sq`] (always the
 //! same `f32` expression, no fused multiply-add), and among equal distances the smaller original
-//! index comes first, so every answer equals a brute-force sort by `(dist_sq, index)`.
+//! index comes first, so every answer equals a brute-force sort by `(dist_sq, index)`. Searches
+//! keep results as packed `(dist_sq bits, index)` keys so that this order is one integer compare.
+//! Batch queries run in the order of the leaves they fall in (cache locality), in parallel with
+//! the `parallel` feature, and give exactly the single-query answers whatever the thread count.
 //!
 //! Non-finite input: points with a NaN or infinite coordinate are stored nowhere and never returned
 //! (the pipeline rejects them before; the tree only promises not to panic). Queries with a NaN or

@@ -215,9 +215,12 @@ impl KdTree {
     /// The nearest point to `query` (smallest index among equally near ones), or `None` for an
     /// empty tree or a non-finite query.
     pub fn nearest(&self, query: [f32; 3]) -> Option<Neighbor> {
-        let mut out = Vec::with_capacity(1);
-        self.knn(query, 1, &mut out);
-        out.first().copied()
+        if self.idx.is_empty() || !query.iter().all(|c| c.is_finite()) {
+            return None;
+        }
+        let mut best = [SENTINEL];
+        self.knn_into(query, &mut best);
+        Some(unkey(best[0]))
     }
 
     /// All points with `dist_sq <= radius_sq`, into `out` (cleared first), sorted by

@@ -86,6 +86,20 @@ fn ref_nonmanifold_vertices(m: &PolyMesh) -> usize {
     count
 }
 
+const IDENTITY: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+
+/// Diagonal of the axis-aligned bounding box of the vertices.
+fn bbox_diag(m: &PolyMesh) -> f64 {
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for p in &m.vertices {
+        for c in 0..3 {
+            lo[c] = lo[c].min(p[c]);
+            hi[c] = hi[c].max(p[c]);
+        }
+    }
+    ((0..3).map(|c| (hi[c] - lo[c]).powi(2)).sum::<f64>()).sqrt()
+}
+
 fn close(a: f64, b: f64, rel: f64) -> bool {
     (a - b).abs() <= rel * (1.0 + a.abs().max(b.abs()))
 }
@@ -147,7 +161,13 @@ proptest! {
         pred.faces.truncate(pred.faces.len() - 1);
         let (g1, g2) = (compare(&pred, &m, seed).unwrap(), compare(&transform(&pred, &r, s, t), &mt, seed).unwrap());
         prop_assert_eq!((g1.precision, g1.recall), (g2.precision, g2.recall));
-        prop_assert!(close(g1.chamfer, g2.chamfer, 1e-5), "{} vs {}", g1.chamfer, g2.chamfer);
+        // Chamfer is in units of the GT's axis-aligned bbox diagonal (DESIGN §7), which a
+        // rotation changes; in absolute units it is invariant (and scales with s).
+        let (d1, d2) = (bbox_diag(&m), bbox_diag(&mt));
+        prop_assert!(close(g1.chamfer * d1 * s, g2.chamfer * d2, 1e-5), "{} vs {}", g1.chamfer * d1 * s, g2.chamfer * d2);
+        // Translation and uniform scale alone keep even the normalised value.
+        let g3 = compare(&transform(&pred, &IDENTITY, s, t), &transform(&m, &IDENTITY, s, t), seed).unwrap();
+        prop_assert!(close(g1.chamfer, g3.chamfer, 1e-5), "{} vs {}", g1.chamfer, g3.chamfer);
     }
 
     /// Precision and recall against a brute-force reference: remove k faces, add wrong
@@ -192,14 +212,7 @@ proptest! {
         pred.vertices = verts;
 
         // Reference: O(V²) matching in the GT's bbox-diagonal units.
-        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-        for p in &gt.vertices {
-            for c in 0..3 {
-                lo[c] = lo[c].min(p[c]);
-                hi[c] = hi[c].max(p[c]);
-            }
-        }
-        let gdiag = ((0..3).map(|c| (hi[c] - lo[c]).powi(2)).sum::<f64>()).sqrt();
+        let gdiag = bbox_diag(&gt);
         let matched: Vec<Option<u32>> = pred.vertices.iter().map(|p| {
             (0..gt.vertices.len() as u32).find(|&g| {
                 let q = gt.vertices[g as usize];
@@ -247,8 +260,7 @@ fn chamfer_of_shifted_plane_is_bounded_by_the_shift_and_the_floor() {
     assert!(floor > 0.0 && floor < 0.01, "sampling floor {floor}");
     let mut last = floor;
     for d in [0.001, 0.01, 0.05, 0.2] {
-        let shifted =
-            transform(&gt, &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], 1.0, [0.0, 0.0, d * diag]);
+        let shifted = transform(&gt, &IDENTITY, 1.0, [0.0, 0.0, d * diag]);
         let cd = compare(&shifted, &gt, 7).unwrap();
         assert!(cd.chamfer >= 2.0 * d - 1e-12 && cd.chamfer <= 2.0 * d + floor + 1e-9, "d {d}: {cd:?}");
         assert!(cd.chamfer > last);

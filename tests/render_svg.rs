@@ -16,7 +16,9 @@ fn no_bad_numbers(svg: &str) -> bool {
 }
 
 fn count_lines(svg: &str, class: &str, color: &str) -> usize {
-    svg.lines().filter(|l| l.starts_with("<line") && l.contains(&format!("class=\"{class}\"")) && l.contains(color)).count()
+    svg.lines()
+        .filter(|l| l.starts_with("<line") && l.contains(&format!("class=\"{class}\"")) && l.contains(color))
+        .count()
 }
 
 #[test]
@@ -98,7 +100,8 @@ fn degenerate_faces_draw_without_nan() {
     assert!(svg.contains("3 faces not drawn"));
     // A single point (all vertices equal) still gives finite coordinates.
     let p = PolyMesh { vertices: vec![[5.0; 3]; 4], faces: vec![vec![0, 1, 2, 3]] };
-    let svg = render_svg(&p, &RenderOptions { azimuth_deg: 1e300, elevation_deg: -1e300, ..Default::default() });
+    let svg =
+        render_svg(&p, &RenderOptions { azimuth_deg: 1e300, elevation_deg: -1e300, ..Default::default() });
     check_xml(&svg).unwrap();
     assert!(no_bad_numbers(&svg));
 }
@@ -107,7 +110,16 @@ fn degenerate_faces_draw_without_nan() {
 fn painter_order_draws_the_near_cube_face_last() {
     // Looking from +z (azimuth 0, elevation 0): the cube's z = 1 face is nearest.
     let m = cube([0.0; 3]);
-    let svg = render_svg(&m, &RenderOptions { azimuth_deg: 0.0, elevation_deg: 0.0, width: 100, height: Some(100), face_edges: true });
+    let svg = render_svg(
+        &m,
+        &RenderOptions {
+            azimuth_deg: 0.0,
+            elevation_deg: 0.0,
+            width: 100,
+            height: Some(100),
+            face_edges: true,
+        },
+    );
     let pts = attr_values(&svg, "polygon", "points");
     let fills = attr_values(&svg, "polygon", "fill");
     assert_eq!(pts.len(), 6);
@@ -117,7 +129,8 @@ fn painter_order_draws_the_near_cube_face_last() {
     let xs: Vec<f64> = last.split(' ').map(|xy| xy.split_once(',').unwrap().0.parse().unwrap()).collect();
     assert!(xs.iter().cloned().fold(f64::INFINITY, f64::min) < 13.0);
     assert!(xs.iter().cloned().fold(0.0, f64::max) > 87.0);
-    let brightness = |c: &str| u32::from_str_radix(&c[1..3], 16).unwrap() + u32::from_str_radix(&c[3..5], 16).unwrap();
+    let brightness =
+        |c: &str| u32::from_str_radix(&c[1..3], 16).unwrap() + u32::from_str_radix(&c[3..5], 16).unwrap();
     let front = brightness(fills.last().unwrap());
     assert!(fills.iter().all(|f| brightness(f) <= front));
 }

@@ -6,7 +6,8 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
+use crate::io::atomic::write_atomic;
 use crate::math::{add, cross, dot, normalize, scale};
 use crate::mesh::poly::PolyMesh;
 use crate::mesh::quality::edge_uses;
@@ -226,6 +227,16 @@ pub fn render_svg(mesh: &PolyMesh, opts: &RenderOptions) -> String {
     );
     svg.push_str("</svg>\n");
     svg
+}
+
+/// Renders `mesh` with [`render_svg`] and writes the picture to `path` atomically
+/// (a temporary file renamed over `path`, so a failed write leaves no half file).
+///
+/// # Errors
+/// `Io` naming `path` when the file cannot be written.
+pub fn write_svg(path: &Path, mesh: &PolyMesh, opts: &RenderOptions) -> Result<()> {
+    let svg = render_svg(mesh, opts);
+    write_atomic(path, |w| w.write_all(svg.as_bytes()).map_err(|e| Error::io(path, e)))
 }
 
 fn header(svg: &mut String, width: f64, height: f64, faces: usize) {

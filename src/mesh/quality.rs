@@ -19,22 +19,7 @@ use crate::math::{cross, dot, norm, normalize, sub};
 use crate::mesh::poly::PolyMesh;
 use crate::rng::Rng;
 
-// TEMPORARY brute-force stand-in until `spatial::kdtree` lands on main.
-struct KdTree(Vec<[f32; 3]>);
-struct Neighbor {
-    index: usize,
-}
-impl KdTree {
-    fn build(p: &[[f32; 3]]) -> Self {
-        KdTree(p.to_vec())
-    }
-    fn nearest(&self, q: [f32; 3]) -> Option<Neighbor> {
-        let d = |p: &[f32; 3]| (0..3).map(|k| (p[k] - q[k]) * (p[k] - q[k])).sum::<f32>();
-        (0..self.0.len())
-            .min_by(|&a, &b| d(&self.0[a]).total_cmp(&d(&self.0[b])))
-            .map(|index| Neighbor { index })
-    }
-}
+use crate::spatial::kdtree::KdTree;
 
 /// Quality figures of one mesh (DESIGN §7). All values are finite.
 ///
@@ -114,6 +99,9 @@ pub const CHAMFER_SAMPLES: usize = 10_000;
 /// Vertex matching tolerance for precision/recall, relative to the ground truth's
 /// bounding-box diagonal.
 pub const MATCH_TOLERANCE: f64 = 1e-5;
+
+/// Frame coordinates are clamped to this many ground-truth diagonals (finite in f32).
+const FAR_CLAMP: f64 = 1e30;
 
 /// One undirected edge and how many face sides use it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -461,8 +449,12 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
     }
     let centre: [f64; 3] = std::array::from_fn(|k| 0.5 * (lo[k] + hi[k]));
     // Everything below works in the ground truth's unit-diagonal frame, centred, so
-    // that f32 kd-tree coordinates keep ~1e-7 relative precision.
-    let frame = |p: [f64; 3]| -> [f64; 3] { std::array::from_fn(|k| (p[k] - centre[k]) / diag) };
+    // that f32 kd-tree coordinates keep ~1e-7 relative precision. Coordinates are
+    // clamped to ±1e30 diagonals so that an absurdly far (finite) prediction still
+    // gives a finite distance and a finite f32 point.
+    let frame = |p: [f64; 3]| -> [f64; 3] {
+        std::array::from_fn(|k| ((p[k] - centre[k]) / diag).clamp(-FAR_CLAMP, FAR_CLAMP))
+    };
 
     let mut rng = Rng::new(seed);
     let (mut rng_pred, mut rng_gt) = (rng.fork(1), rng.fork(2));
@@ -477,19 +469,14 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
     // Vertex matching: nearest ground-truth vertex, accepted within the tolerance
     // (checked in f64).
     let gt_pts: Vec<[f64; 3]> = gt.vertices.iter().map(|&p| frame(p)).collect();
-    let gt_finite: Vec<u32> =
-        (0..gt_pts.len() as u32).filter(|&i| gt_pts[i as usize].iter().all(|c| c.is_finite())).collect();
-    let gt32: Vec<[f32; 3]> = gt_finite.iter().map(|&i| crate::math::to_f32(gt_pts[i as usize])).collect();
+    // The kd-tree leaves out non-finite points and reports input indices.
+    let gt32: Vec<[f32; 3]> = gt_pts.iter().map(|&p| crate::math::to_f32(p)).collect();
     let tree = KdTree::build(&gt32);
     let tol_sq = MATCH_TOLERANCE * MATCH_TOLERANCE;
     let matched: Vec<Option<u32>> = crate::par::map(pred.vertices.len(), |i| {
         let p = frame(pred.vertices[i]);
-        if !p.iter().all(|c| c.is_finite()) {
-            return None;
-        }
         let nb = tree.nearest(crate::math::to_f32(p))?;
-        let g = gt_finite[nb.index as usize];
-        (crate::math::dist_sq(p, gt_pts[g as usize]) <= tol_sq).then_some(g)
+        (crate::math::dist_sq(p, gt_pts[nb.index as usize]) <= tol_sq).then_some(nb.index)
     });
     let matched_vertices = matched.iter().filter(|m| m.is_some()).count();
 

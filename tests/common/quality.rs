@@ -381,7 +381,7 @@ pub fn attr_values(svg: &str, name: &str, key: &str) -> Vec<String> {
     svg.split(&open)
         .skip(1)
         .filter_map(|el| {
-            let el = &el[..el.find('>').unwrap_or(el.len())];
+            let el = format!(" {}", &el[..el.find('>').unwrap_or(el.len())]);
             let start = el.find(&pat)? + pat.len();
             Some(el[start..start + el[start..].find('"')?].to_string())
         })

@@ -15,15 +15,18 @@ use crate::mesh::quality::edge_uses;
 /// How to draw a mesh.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RenderOptions {
-    /// Viewer direction around the up axis (+y), in degrees; 0 looks from +z.
+    /// Viewer direction around the up axis, in degrees; 0 looks from +z (from −y when
+    /// `z_up`), 90 from +x.
     pub azimuth_deg: f64,
-    /// Viewer height above the horizontal plane, in degrees (90 looks down from +y).
+    /// Viewer height above the horizontal plane, in degrees (90 looks down the up axis).
     pub elevation_deg: f64,
     /// Picture width in pixels.
     pub width: u32,
     /// Picture height in pixels; `None` fits the mesh's projected aspect ratio
     /// (between 0.3 and 2 times the width).
     pub height: Option<u32>,
+    /// Treat +z as up instead of +y (the azimuth then turns around z).
+    pub z_up: bool,
     /// Draw the edges of every face (thin, dark). Boundary and non-manifold edges
     /// are always drawn.
     pub face_edges: bool,
@@ -31,7 +34,14 @@ pub struct RenderOptions {
 
 impl Default for RenderOptions {
     fn default() -> Self {
-        RenderOptions { azimuth_deg: 30.0, elevation_deg: 20.0, width: 800, height: None, face_edges: true }
+        RenderOptions {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            width: 800,
+            height: None,
+            z_up: false,
+            face_edges: true,
+        }
     }
 }
 
@@ -52,6 +62,17 @@ struct View {
 }
 
 impl View {
+    /// The view of a z-up world: the y-up view of the world turned by (x, y, z) ↦
+    /// (x, z, −y), which maps its vectors (a, b, c) back to (a, −c, b).
+    fn new_up(azimuth_deg: f64, elevation_deg: f64, z_up: bool) -> View {
+        let v = View::new(azimuth_deg, elevation_deg);
+        if !z_up {
+            return v;
+        }
+        let back = |w: [f64; 3]| [w[0], -w[2], w[1]];
+        View { right: back(v.right), up: back(v.up), toward: back(v.toward) }
+    }
+
     fn new(azimuth_deg: f64, elevation_deg: f64) -> View {
         let (az, el) = (azimuth_deg.to_radians(), elevation_deg.to_radians());
         let (az, el) = (if az.is_finite() { az } else { 0.0 }, if el.is_finite() { el } else { 0.0 });
@@ -110,7 +131,7 @@ pub fn render_svg(mesh: &PolyMesh, opts: &RenderOptions) -> String {
         return svg;
     }
 
-    let view = View::new(opts.azimuth_deg, opts.elevation_deg);
+    let view = View::new_up(opts.azimuth_deg, opts.elevation_deg, opts.z_up);
     // Project every vertex that a drawn face uses.
     let mut used = vec![false; mesh.vertices.len()];
     for &f in &drawn {
@@ -290,8 +311,11 @@ mod tests {
 
     #[test]
     fn view_frame_is_orthonormal_even_looking_straight_down() {
-        for (az, el) in [(30.0, 20.0), (0.0, 90.0), (123.0, -90.0), (f64::NAN, 1.0)] {
-            let v = View::new(az, el);
+        for (az, el, z_up) in
+            [(30.0, 20.0, false), (0.0, 90.0, true), (123.0, -90.0, false), (f64::NAN, 1.0, true)]
+        {
+            let v = View::new_up(az, el, z_up);
+            assert!((dot(cross(v.right, v.up), v.toward) - 1.0).abs() < 1e-12, "right-handed");
             for (a, b) in [(v.right, v.up), (v.up, v.toward), (v.toward, v.right)] {
                 assert!(dot(a, b).abs() < 1e-12);
             }
@@ -299,5 +323,14 @@ mod tests {
                 assert!((dot(a, a) - 1.0).abs() < 1e-12);
             }
         }
+    }
+
+    #[test]
+    fn z_up_looks_up_the_z_axis() {
+        let v = View::new_up(0.0, 0.0, true);
+        assert!((v.up[2] - 1.0).abs() < 1e-12);
+        assert!((v.toward[1] + 1.0).abs() < 1e-12);
+        let v = View::new_up(0.0, 90.0, true);
+        assert!((v.toward[2] - 1.0).abs() < 1e-12);
     }
 }

@@ -12,12 +12,13 @@ pub const HELP: &str = "\
 point2quad render: shaded SVG picture of a mesh
 
 USAGE:
-    point2quad render MESH -o OUT.svg [--view AZ,EL] [--width W] [--height H] [--no-edges]
+    point2quad render MESH -o OUT.svg [--view AZ,EL] [--up y|z] [--width W] [--height H] [--no-edges]
 
 ARGS:
     MESH           mesh to draw (.obj .ply .off; any polygons)
     -o OUT.svg     picture to write
-    --view AZ,EL   viewer azimuth around +y and elevation, degrees (default 30,20)
+    --view AZ,EL   viewer azimuth around the up axis and elevation, degrees (default 30,20)
+    --up y|z       which axis points up in the picture (default y)
     --width W      width in pixels (default 800)
     --height H     height in pixels (default: fit the mesh)
     --no-edges     do not draw face edges (boundary and non-manifold edges still are)
@@ -27,7 +28,7 @@ edges red, non-manifold edges blue, drawn on top.
 ";
 
 pub fn run(argv: &[String]) -> Result<()> {
-    let spec = Spec { valued: &["-o", "--view", "--width", "--height"], switches: &["--no-edges"] };
+    let spec = Spec { valued: &["-o", "--view", "--up", "--width", "--height"], switches: &["--no-edges"] };
     let args = Args::parse("render", argv, &spec)?;
     let input = &args.expect_positional("render", 1, "one mesh MESH")?[0];
     let out = args.required("render", "-o")?;
@@ -44,6 +45,15 @@ pub fn run(argv: &[String]) -> Result<()> {
         })?;
         (opts.azimuth_deg, opts.elevation_deg) = (az, el);
     }
+    opts.z_up = match args.value("--up").unwrap_or("y") {
+        "y" | "Y" => false,
+        "z" | "Z" => true,
+        other => {
+            return Err(Error::Usage(format!(
+                "render: --up: expected y or z, got {other:?} (see `point2quad render --help`)"
+            )))
+        }
+    };
     opts.width = args.parsed("render", "--width", opts.width)?;
     if args.value("--height").is_some() {
         opts.height = Some(args.parsed("render", "--height", 0u32)?);

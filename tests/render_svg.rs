@@ -110,25 +110,29 @@ fn degenerate_faces_draw_without_nan() {
 fn painter_order_draws_the_near_cube_face_last() {
     // Looking from +z (azimuth 0, elevation 0): the cube's z = 1 face is nearest.
     let m = cube([0.0; 3]);
-    let svg = render_svg(
-        &m,
-        &RenderOptions {
-            azimuth_deg: 0.0,
-            elevation_deg: 0.0,
-            width: 100,
-            height: Some(100),
-            face_edges: true,
-        },
-    );
+    let opts = RenderOptions {
+        azimuth_deg: 0.0,
+        elevation_deg: 0.0,
+        width: 100,
+        height: Some(100),
+        ..Default::default()
+    };
+    let svg = render_svg(&m, &opts);
     let pts = attr_values(&svg, "polygon", "points");
     let fills = attr_values(&svg, "polygon", "fill");
     assert_eq!(pts.len(), 6);
-    // The near face covers the whole square picture area minus the margin; it is drawn last
-    // and lit brightest of all (it faces the viewer, the light comes from near the viewer).
-    let last = pts.last().unwrap();
-    let xs: Vec<f64> = last.split(' ').map(|xy| xy.split_once(',').unwrap().0.parse().unwrap()).collect();
-    assert!(xs.iter().cloned().fold(f64::INFINITY, f64::min) < 13.0);
-    assert!(xs.iter().cloned().fold(0.0, f64::max) > 87.0);
+    // The near face is the whole projected square: drawn last, it spans the drawing's full
+    // x extent; and it is lit brightest (it faces the viewer; the light is near the viewer).
+    let xs = |p: &String| -> Vec<f64> {
+        p.split(' ').map(|xy| xy.split_once(',').unwrap().0.parse().unwrap()).collect()
+    };
+    let all: Vec<f64> = pts.iter().flat_map(xs).collect();
+    let last = xs(pts.last().unwrap());
+    let range =
+        |v: &[f64]| (v.iter().cloned().fold(f64::INFINITY, f64::min), v.iter().cloned().fold(0.0, f64::max));
+    assert_eq!(range(&last), range(&all));
+    let (lo, hi) = range(&all);
+    assert!(lo >= 12.0 && hi <= 88.0 && hi - lo > 50.0, "{lo} {hi}");
     let brightness =
         |c: &str| u32::from_str_radix(&c[1..3], 16).unwrap() + u32::from_str_radix(&c[3..5], 16).unwrap();
     let front = brightness(fills.last().unwrap());

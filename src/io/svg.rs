@@ -53,6 +53,8 @@ const FACE_EDGE_COLOR: &str = "#202428";
 const FRONT_RGB: [f64; 3] = [168.0, 192.0, 232.0];
 const BACK_RGB: [f64; 3] = [150.0, 128.0, 110.0];
 const MARGIN: f64 = 12.0;
+/// Height of the caption strip under the drawing.
+const CAPTION: f64 = 16.0;
 
 /// The viewer's frame: `right` and `up` span the picture, `toward` points at the viewer.
 struct View {
@@ -149,19 +151,22 @@ pub fn render_svg(mesh: &PolyMesh, opts: &RenderOptions) -> String {
         }
     }
     let extent = [hi[0] - lo[0], hi[1] - lo[1]];
+    // The picture is the drawing area plus a caption strip at the bottom.
     let height = match opts.height {
         Some(h) => f64::from(h.max(16)),
-        None if extent[0] > 0.0 => ((width - 2.0 * MARGIN) * extent[1] / extent[0] + 2.0 * MARGIN)
+        None if extent[0] > 0.0 => (((width - 2.0 * MARGIN) * extent[1] / extent[0] + 2.0 * MARGIN)
             .clamp(0.3 * width, 2.0 * width)
+            + CAPTION)
             .round(),
-        None => width,
+        None => width + CAPTION,
     };
+    let area = (height - CAPTION).max(2.0 * MARGIN + 1.0);
     let fit_x = if extent[0] > 0.0 { (width - 2.0 * MARGIN) / extent[0] } else { f64::INFINITY };
-    let fit_y = if extent[1] > 0.0 { (height - 2.0 * MARGIN) / extent[1] } else { f64::INFINITY };
+    let fit_y = if extent[1] > 0.0 { (area - 2.0 * MARGIN) / extent[1] } else { f64::INFINITY };
     let s = if fit_x.min(fit_y).is_finite() { fit_x.min(fit_y) } else { 1.0 };
     // Centre the drawing in the picture; SVG's y grows downwards.
     let (cx, cy) = (0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]));
-    let px = |p: [f64; 3]| -> (f64, f64) { (width / 2.0 + (p[0] - cx) * s, height / 2.0 - (p[1] - cy) * s) };
+    let px = |p: [f64; 3]| -> (f64, f64) { (width / 2.0 + (p[0] - cx) * s, area / 2.0 - (p[1] - cy) * s) };
 
     // Painter's order: farthest (smallest depth towards the viewer) first; ties by index.
     let depth = |f: usize| {

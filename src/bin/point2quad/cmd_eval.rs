@@ -9,6 +9,7 @@ use point2quad::io::mesh_io::read_mesh;
 use point2quad::mesh::quality::{compare, mesh_metrics, GtMetrics, MeshMetrics};
 use point2quad::Result;
 
+/// The text of `point2quad eval --help`.
 pub const HELP: &str = "\
 point2quad eval: mesh quality and accuracy metrics (DESIGN §7)
 
@@ -28,6 +29,10 @@ Shape measures (scaled Jacobian, edge ratio, angle deviation) use quad faces onl
 other faces are counted. Edges are the undirected sides of the faces.
 ";
 
+/// Runs `point2quad eval` on its arguments (after the subcommand name).
+///
+/// # Errors
+/// `Usage` for bad arguments; read, parse and write errors naming the file.
 pub fn run(argv: &[String]) -> Result<()> {
     let spec = Spec { valued: &["--gt", "--seed"], switches: &["--json"] };
     let args = Args::parse("eval", argv, &spec)?;

@@ -8,6 +8,7 @@ use point2quad::io::mesh_io::read_mesh;
 use point2quad::io::svg::{write_svg, RenderOptions};
 use point2quad::{Error, Result};
 
+/// The text of `point2quad render --help`.
 pub const HELP: &str = "\
 point2quad render: shaded SVG picture of a mesh
 
@@ -27,6 +28,10 @@ Faces are drawn back to front with Lambert shading; back faces are dimmed; bound
 edges red, non-manifold edges blue, drawn on top.
 ";
 
+/// Runs `point2quad render` on its arguments (after the subcommand name).
+///
+/// # Errors
+/// `Usage` for bad arguments; read, parse and write errors naming the file.
 pub fn run(argv: &[String]) -> Result<()> {
     let spec = Spec { valued: &["-o", "--view", "--up", "--width", "--height"], switches: &["--no-edges"] };
     let args = Args::parse("render", argv, &spec)?;

@@ -45,7 +45,9 @@ fn build(params: &mut ParamStore, rng: &mut Rng) -> FaceNet {
     let cls = cw
         .iter()
         .enumerate()
-        .map(|(i, &(a, b))| ConvBnAct::new(params, &format!("cls{i}"), a, b, Act::Relu, bn, rng).expect("layer"))
+        .map(|(i, &(a, b))| {
+            ConvBnAct::new(params, &format!("cls{i}"), a, b, Act::Relu, bn, rng).expect("layer")
+        })
         .collect();
     let head = Conv1d::new(params, "cls_head", 64, 2, true, rng).expect("head");
     FaceNet { enc, res, cls, head }
@@ -70,7 +72,13 @@ fn flops_fwd(m: usize) -> f64 {
 }
 
 /// Forward to the scalar loss; frees dead intermediates when not recording.
-fn forward(net: &FaceNet, g: &mut Graph, finfo: &Tensor, pfeat: &Tensor, labels: &[u8]) -> point2quad::tensor::Var {
+fn forward(
+    net: &FaceNet,
+    g: &mut Graph,
+    finfo: &Tensor,
+    pfeat: &Tensor,
+    labels: &[u8],
+) -> point2quad::tensor::Var {
     let x = g.input(finfo.clone());
     let mut h = net.enc[0].forward(g, x).expect("enc0");
     g.free(x);

@@ -56,7 +56,9 @@ fn off_kinks(s: &mut ParamStore, blk: &ConvBnAct, x: point2quad::tensor::ParamId
     let far = g.value(y).data().iter().all(|v| v.abs() > 0.05);
     let (m, cin, cout) = (xt.rows(), xt.cols(), wt.rows());
     let var_ok = (0..cout).all(|j| {
-        let z: Vec<f64> = (0..m).map(|i| (0..cin).map(|p| xt.data()[i * cin + p] as f64 * wt.data()[j * cin + p] as f64).sum()).collect();
+        let z: Vec<f64> = (0..m)
+            .map(|i| (0..cin).map(|p| xt.data()[i * cin + p] as f64 * wt.data()[j * cin + p] as f64).sum())
+            .collect();
         let mu = z.iter().sum::<f64>() / m as f64;
         z.iter().map(|v| (v - mu).powi(2)).sum::<f64>() / m as f64 >= 0.01
     });

@@ -17,7 +17,7 @@
 
 use crate::tensor::{ParamStore, Tensor};
 use crate::{Error, Result};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// File magic.
 pub const MAGIC: [u8; 8] = *b"P2QCKPT\0";
@@ -297,20 +297,15 @@ impl Checkpoint {
     }
 }
 
-/// Writes `ckpt` to `path` atomically (temporary file in the same folder, then rename).
+/// Writes `ckpt` to `path` atomically (`crate::io::atomic::write_atomic`: temporary
+/// file in the same folder, synced, then renamed), so a crash never leaves a
+/// half-written checkpoint.
 ///
 /// # Errors
 /// `Error::Io` naming the path.
 pub fn save(path: &Path, ckpt: &Checkpoint) -> Result<()> {
     let bytes = ckpt.to_bytes();
-    let mut tmp = PathBuf::from(path);
-    let fname = path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    tmp.set_file_name(format!(".{fname}.tmp{}", std::process::id()));
-    std::fs::write(&tmp, &bytes).map_err(|e| Error::io(&tmp, e))?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::io(path, e)
-    })
+    crate::io::atomic::write_atomic(path, |w| w.write_all(&bytes).map_err(|e| Error::io(path, e)))
 }
 
 /// Reads and checks a checkpoint file.

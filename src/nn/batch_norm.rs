@@ -56,7 +56,7 @@ impl BatchNorm1d {
         if channels == 0 {
             return Err(Error::invalid(format!("batch norm '{name}' with 0 channels")));
         }
-        if !(0.0..=1.0).contains(&cfg.momentum) || !(cfg.eps >= 0.0) {
+        if !(0.0..=1.0).contains(&cfg.momentum) || cfg.eps.is_nan() || cfg.eps < 0.0 {
             return Err(Error::invalid(format!(
                 "batch norm '{name}': momentum {} / eps {}",
                 cfg.momentum, cfg.eps

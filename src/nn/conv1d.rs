@@ -111,7 +111,7 @@ impl ConvBnAct {
             return Err(Error::invalid(format!("block '{name}': widths must be positive ({cin} → {cout})")));
         }
         if let Act::LeakyRelu(s) = act {
-            if !(s >= 0.0) {
+            if s.is_nan() || s < 0.0 {
                 return Err(Error::invalid(format!("block '{name}': leaky slope {s} must be ≥ 0")));
             }
         }

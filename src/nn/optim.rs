@@ -80,7 +80,7 @@ impl Sgd {
         if !ok(cfg.lr) || !ok(cfg.momentum) || cfg.momentum >= 1.0 || !ok(cfg.weight_decay) {
             return Err(Error::invalid(format!("bad SGD config {cfg:?}")));
         }
-        if cfg.clip.is_some_and(|c| !(c > 0.0)) || (cfg.nesterov && cfg.momentum == 0.0) {
+        if cfg.clip.is_some_and(|c| c.is_nan() || c <= 0.0) || (cfg.nesterov && cfg.momentum == 0.0) {
             return Err(Error::invalid(format!("bad SGD config {cfg:?}")));
         }
         Ok(Sgd { cfg, bufs: Vec::new(), steps: 0 })

@@ -596,7 +596,7 @@ impl<'p> Graph<'p> {
         if let Some(p) = idx.iter().position(|&i| i as usize > n) {
             return Err(shape_err("max_neighbors", format!("index {} at {p} out of range 0..={n}", idx[p])));
         }
-        let n_out = if k == 0 { 0 } else { idx.len() / k };
+        let n_out = idx.len().checked_div(k).unwrap_or(0);
         let mut out = vec![0.0f32; n_out * c];
         let mut argmax = vec![n as u32; n_out * c];
         let d = t.data();
@@ -666,7 +666,7 @@ impl<'p> Graph<'p> {
         vars.extend(w);
         self.check_live("conv_bn_act", &vars)?;
         if let Act::LeakyRelu(s) = act {
-            if !(s >= 0.0) {
+            if s.is_nan() || s < 0.0 {
                 return Err(Error::invalid(format!("leaky slope {s} must be ≥ 0 in the fused block")));
             }
         }

@@ -12,7 +12,9 @@
 //!   bench face_net_fwd_eval_120k <ms> ms     inference forward (no_grad, running stats)
 //!   bench face_net_gflops <x> GFLOP/s        of forward + backward: 3 · Σ 2·M·Cin·Cout / fwdbwd time
 //!   bench face_net_peak_rss <MiB> MiB        VmHWM of the process
-//! Threads: RAYON_NUM_THREADS (default all cores). `FACE_NET_M` overrides M.
+//! Threads: RAYON_NUM_THREADS (default all cores). `FACE_NET_M` overrides M. Run
+//! without `--bench` (as `cargo test --all-targets` does) it only makes one small smoke
+//! pass (M = 1024) and prints nothing on stdout.
 
 use point2quad::nn::batch_norm::BatchNormConfig;
 use point2quad::nn::conv1d::{Conv1d, ConvBnAct};
@@ -135,7 +137,10 @@ fn cpu_s() -> f64 {
 }
 
 fn main() {
-    let m: usize = std::env::var("FACE_NET_M").ok().and_then(|v| v.parse().ok()).unwrap_or(120_000);
+    let bench_mode = std::env::args().any(|a| a == "--bench");
+    let default_m = if bench_mode { 120_000 } else { 1024 };
+    let m: usize = std::env::var("FACE_NET_M").ok().and_then(|v| v.parse().ok()).unwrap_or(default_m);
+    let runs = if bench_mode { RUNS } else { 0 };
     let mut rng = Rng::new(0);
     let mut params = ParamStore::new();
     let net = build(&mut params, &mut rng);
@@ -144,7 +149,7 @@ fn main() {
     let labels: Vec<u8> = (0..m).map(|_| (rng.f32() < 0.25) as u8).collect();
 
     let (mut fwd, mut fwdbwd, mut eval) = (Vec::new(), Vec::new(), Vec::new());
-    for run in 0..=RUNS {
+    for run in 0..=runs {
         let (t, c0) = (Instant::now(), cpu_s());
         {
             let mut g = Graph::train(&mut params);
@@ -180,6 +185,10 @@ fn main() {
             fwdbwd.push(t_fb);
             eval.push(t_ev);
         }
+    }
+    if !bench_mode {
+        eprintln!("face_net: smoke run only (M = {m}); use `cargo bench --bench face_net` for figures");
+        return;
     }
     let (f, fb, ev) = (median(fwd), median(fwdbwd), median(eval));
     let suffix = if m == 120_000 { "120k".to_string() } else { format!("{m}") };

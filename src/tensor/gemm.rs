@@ -13,7 +13,7 @@ use crate::par;
 use nalgebra::{Dyn, MatrixView, MatrixViewMut};
 
 /// Rows of the output computed by one GEMM call in [`gemm_rows`].
-pub const ROW_BLOCK: usize = 256;
+pub const ROW_BLOCK: usize = 512;
 /// Rows of the reduction axis summed by one GEMM call in [`gemm_tn`].
 pub const RED_BLOCK: usize = 8192;
 

@@ -154,7 +154,16 @@ struct Model {
 fn model() -> Model {
     let mut rng = Rng::new(42);
     let mut params = ParamStore::new();
-    let l0 = ConvBnAct::new(&mut params, "l0", 6, 16, Act::LeakyRelu(0.1), BatchNormConfig { eps: 1e-5, momentum: 0.02 }, &mut rng).unwrap();
+    let l0 = ConvBnAct::new(
+        &mut params,
+        "l0",
+        6,
+        16,
+        Act::LeakyRelu(0.1),
+        BatchNormConfig { eps: 1e-5, momentum: 0.02 },
+        &mut rng,
+    )
+    .unwrap();
     let head = Conv1d::new(&mut params, "head", 16, 2, true, &mut rng).unwrap();
     Model { params, l0, head }
 }
@@ -192,7 +201,8 @@ fn training_resumes_bit_identically() {
     let mut sgd1 = Sgd::new(cfg).unwrap();
     let mut rng1 = Rng::new(1);
     train(&mut first, &mut sgd1, &mut rng1, 4);
-    let state = TrainState { epoch: 4, step: sgd1.steps(), rng: rng1.state(), momentum: sgd1.buffers(&first.params) };
+    let state =
+        TrainState { epoch: 4, step: sgd1.steps(), rng: rng1.state(), momentum: sgd1.buffers(&first.params) };
     let bytes = Checkpoint::from_store(&first.params, b"cfg", Some(state)).to_bytes();
     drop(first);
 

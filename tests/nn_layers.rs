@@ -56,7 +56,9 @@ fn off_kinks(s: &mut ParamStore, blk: &ConvBnAct, x: point2quad::tensor::ParamId
     let far = g.value(y).data().iter().all(|v| v.abs() > 0.05);
     let (m, cin, cout) = (xt.rows(), xt.cols(), wt.rows());
     let var_ok = (0..cout).all(|j| {
-        let z: Vec<f64> = (0..m).map(|i| (0..cin).map(|p| xt.data()[i * cin + p] as f64 * wt.data()[j * cin + p] as f64).sum()).collect();
+        let z: Vec<f64> = (0..m)
+            .map(|i| (0..cin).map(|p| xt.data()[i * cin + p] as f64 * wt.data()[j * cin + p] as f64).sum())
+            .collect();
         let mu = z.iter().sum::<f64>() / m as f64;
         z.iter().map(|v| (v - mu).powi(2)).sum::<f64>() / m as f64 >= 0.01
     });
@@ -211,11 +213,10 @@ proptest! {
         let labels: Vec<u8> = (0..m).map(|_| (rng.f32() < 0.4) as u8).collect();
         let (mut s, ids) = store_of(vec![logits.clone()]);
         let (mut ce_ref, mut wsum, mut fl_ref) = (0.0f64, 0.0f64, 0.0f64);
-        for i in 0..m {
+        for (i, &y) in labels.iter().enumerate() {
             let (a, b) = (logits.data()[2 * i] as f64, logits.data()[2 * i + 1] as f64);
             let lse = (a.exp() + b.exp()).ln();
             let (p0, p1) = ((a - lse).exp(), (b - lse).exp());
-            let y = labels[i];
             let wi = if y == 1 { w as f64 } else { 1.0 };
             ce_ref -= wi * if y == 1 { b - lse } else { a - lse };
             wsum += wi;

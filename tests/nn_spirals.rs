@@ -39,7 +39,9 @@ fn mlp_learns_two_spirals() {
         Box::new(ConvBnAct::new(&mut params, "l2", 64, 64, Act::Relu, bn, &mut rng).unwrap()),
         Box::new(Conv1d::new(&mut params, "head", 64, 2, true, &mut rng).unwrap()),
     ]);
-    let mut sgd = Sgd::new(SgdConfig { lr: 0.1, momentum: 0.9, weight_decay: 0.0, clip: Some(100.0), nesterov: false }).unwrap();
+    let mut sgd =
+        Sgd::new(SgdConfig { lr: 0.1, momentum: 0.9, weight_decay: 0.0, clip: Some(100.0), nesterov: false })
+            .unwrap();
     let mut grads = Grads::new();
     for _step in 0..600 {
         grads.zero();

@@ -5,11 +5,11 @@
 #[path = "common/tensor.rs"]
 mod tensor_common;
 
-use tensor_common::{assert_grads, max_diff, off_kink, store_of, uniform};
 use point2quad::rng::Rng;
 use point2quad::tensor::{CustomOp, Grads, Graph, ParamStore, Tensor};
 use proptest::prelude::*;
 use std::sync::Arc;
+use tensor_common::{assert_grads, max_diff, off_kink, store_of, uniform};
 
 fn cfg() -> ProptestConfig {
     ProptestConfig { failure_persistence: None, ..ProptestConfig::with_cases(24) }
@@ -176,7 +176,13 @@ impl CustomOp for RowScale {
         let d = x.data().iter().enumerate().map(|(i, &v)| v * self.s[i / c] * w.data()[i % c]).collect();
         Tensor::from_shape(x.shape(), d)
     }
-    fn backward(&self, inputs: &[&Tensor], _o: &Tensor, go: &Tensor, needs: &[bool]) -> point2quad::Result<Vec<Option<Tensor>>> {
+    fn backward(
+        &self,
+        inputs: &[&Tensor],
+        _o: &Tensor,
+        go: &Tensor,
+        needs: &[bool],
+    ) -> point2quad::Result<Vec<Option<Tensor>>> {
         let (x, w) = (inputs[0], inputs[1]);
         let c = x.cols();
         let gx = needs[0].then(|| {
@@ -223,15 +229,32 @@ fn gradcheck_catches_a_wrong_gradient() {
         fn forward(&mut self, i: &[&Tensor]) -> point2quad::Result<Tensor> {
             Tensor::from_shape(i[0].shape(), i[0].data().iter().map(|v| v * v).collect())
         }
-        fn backward(&self, i: &[&Tensor], _o: &Tensor, g: &Tensor, _n: &[bool]) -> point2quad::Result<Vec<Option<Tensor>>> {
+        fn backward(
+            &self,
+            i: &[&Tensor],
+            _o: &Tensor,
+            g: &Tensor,
+            _n: &[bool],
+        ) -> point2quad::Result<Vec<Option<Tensor>>> {
             // d(x²)/dx is 2x; return x instead.
-            Ok(vec![Some(Tensor::from_shape(i[0].shape(), i[0].data().iter().zip(g.data()).map(|(x, g)| x * g).collect())?)])
+            Ok(vec![Some(Tensor::from_shape(
+                i[0].shape(),
+                i[0].data().iter().zip(g.data()).map(|(x, g)| x * g).collect(),
+            )?)])
         }
     }
     let mut rng = Rng::new(5);
     let (mut s, ids) = store_of(vec![uniform(&[3, 3], 0.5, 1.0, &mut rng)]);
     let cfg = point2quad::tensor::GradCheckConfig::default();
-    let rep = point2quad::tensor::gradcheck(&mut s, |g| { let x = g.param(ids[0]); g.custom(Box::new(Wrong), &[x]) }, &cfg).unwrap();
+    let rep = point2quad::tensor::gradcheck(
+        &mut s,
+        |g| {
+            let x = g.param(ids[0]);
+            g.custom(Box::new(Wrong), &[x])
+        },
+        &cfg,
+    )
+    .unwrap();
     assert!(!rep.passed(&cfg));
 }
 
@@ -266,7 +289,8 @@ fn shape_errors_and_misuse_are_errors_not_panics() {
 #[test]
 fn eval_graph_records_nothing_and_matches_recorded_values() {
     let mut rng = Rng::new(9);
-    let (mut s, ids) = store_of(vec![uniform(&[7, 4], -1.0, 1.0, &mut rng), uniform(&[3, 4], -1.0, 1.0, &mut rng)]);
+    let (mut s, ids) =
+        store_of(vec![uniform(&[7, 4], -1.0, 1.0, &mut rng), uniform(&[3, 4], -1.0, 1.0, &mut rng)]);
     let run = |s: &mut ParamStore, record: bool| {
         let mut g = Graph::new(s, record, false);
         let (x, w) = (g.param(ids[0]), g.param(ids[1]));

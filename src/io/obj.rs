@@ -3,7 +3,7 @@
 //! Everything else (vn, vt, g, o, s, usemtl, mtllib, l, p, comments) is skipped.
 
 use super::mesh_io::check_writable;
-use super::text::{self, coord, out_err, parse_i64, show, strip_comment, Lines, Tokens};
+use super::text::{self, coord, out_err, parse_i64, show, Lines, Tokens};
 use crate::error::{Error, Result};
 use crate::mesh::poly::PolyMesh;
 use std::io::Write;
@@ -28,8 +28,7 @@ pub(crate) fn parse_obj_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
     // The largest positive (forward-resolvable) index seen and where, checked at the end.
     let mut max_index: (u64, usize) = (0, 0);
     for (ln, raw) in Lines::new(bytes) {
-        let line = strip_comment(raw);
-        let mut toks = Tokens::new(line);
+        let mut toks = Tokens::commented(raw);
         let Some(key) = toks.next() else { continue };
         match key {
             b"v" => {

@@ -6,7 +6,7 @@
 //! One vertex or face per line, as every writer we know does.
 
 use super::mesh_io::check_writable;
-use super::text::{self, coord, out_err, parse_i64, show, strip_comment, Lines, Tokens};
+use super::text::{self, coord, out_err, parse_i64, show, Lines, Tokens};
 use crate::error::{Error, Result};
 use crate::mesh::poly::PolyMesh;
 use std::io::Write;
@@ -26,12 +26,10 @@ pub fn parse_off(bytes: &[u8], name: &str) -> Result<PolyMesh> {
 
 /// As [`parse_off`]; with `want_faces == false` reading stops after the vertices.
 pub(crate) fn parse_off_with(bytes: &[u8], name: &str, want_faces: bool) -> Result<PolyMesh> {
-    // Non-blank lines with comments removed.
-    let mut lines = Lines::new(bytes)
-        .map(|(n, l)| (n, strip_comment(l)))
-        .filter(|(_, l)| Tokens::new(l).next().is_some());
+    // Lines holding data (not blank, not only a comment).
+    let mut lines = Lines::new(bytes).filter(|(_, l)| Tokens::commented(l).next().is_some());
     let (hl, header) = lines.next().ok_or_else(|| Error::parse(name, 0, "empty file (no OFF header)"))?;
-    let mut toks = Tokens::new(header);
+    let mut toks = Tokens::commented(header);
     let mut key = toks.next().unwrap_or(b"");
     if key == b"N" {
         // `N OFF`: seen in the wild for NOFF.
@@ -71,7 +69,7 @@ pub(crate) fn parse_off_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
             let (l, t) = lines
                 .next()
                 .ok_or_else(|| Error::parse(name, cl, "file ends before the vertex/face counts"))?;
-            toks = Tokens::new(t);
+            toks = Tokens::commented(t);
             cl = l;
         }
     }
@@ -80,8 +78,8 @@ pub(crate) fn parse_off_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
         return Err(Error::parse(name, cl, "expected the counts 'vertices faces [edges]'"));
     }
     let count = |t: &[u8], what: &str| -> Result<usize> {
-        match parse_i64(t) {
-            Some(v) if v >= 0 => Ok(v as usize),
+        match parse_i64(t).and_then(|v| usize::try_from(v).ok()) {
+            Some(v) => Ok(v),
             _ => Err(Error::parse(name, cl, format!("bad {what} count '{}'", show(t)))),
         }
     };
@@ -99,7 +97,7 @@ pub(crate) fn parse_off_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
         let (ln, line) = lines.next().ok_or_else(|| {
             Error::parse(name, 0, format!("truncated: file ends at vertex {i} of {nv} declared"))
         })?;
-        let mut t = Tokens::new(line);
+        let mut t = Tokens::commented(line);
         let mut p = [0.0; 3];
         for (axis, c) in p.iter_mut().enumerate() {
             let tok = t.next().ok_or_else(|| {
@@ -116,10 +114,11 @@ pub(crate) fn parse_off_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
         let (ln, line) = lines.next().ok_or_else(|| {
             Error::parse(name, 0, format!("truncated: file ends at face {i} of {nf} declared"))
         })?;
-        let mut t = Tokens::new(line);
+        let mut t = Tokens::commented(line);
         let ntok = t.next().unwrap_or(b"");
         let n = match parse_i64(ntok) {
-            Some(n) if n >= 3 => n as usize,
+            Some(n) if n >= 3 => usize::try_from(n)
+                .map_err(|_| Error::parse(name, ln, format!("face {i}: vertex count {n} too large")))?,
             Some(n) => {
                 return Err(Error::parse(name, ln, format!("face {i}: has {n} vertices, needs at least 3")))
             }
@@ -169,7 +168,7 @@ fn next_token<'a>(
         return Some((line, t));
     }
     let (l, text) = lines.next()?;
-    *toks = Tokens::new(text);
+    *toks = Tokens::commented(text);
     toks.next().map(|t| (l, t))
 }
 

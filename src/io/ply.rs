@@ -171,8 +171,8 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
             b"element" => {
                 let en = t.next().ok_or_else(|| Error::parse(name, ln, "element without a name"))?;
                 let ct = t.next().unwrap_or(b"");
-                let count = match parse_i64(ct) {
-                    Some(c) if c >= 0 => c as usize,
+                let count = match parse_i64(ct).and_then(|c| usize::try_from(c).ok()) {
+                    Some(c) => c,
                     _ => return Err(Error::parse(name, ln, format!("bad element count '{}'", show(ct)))),
                 };
                 let en = String::from_utf8_lossy(en).into_owned();

@@ -2,7 +2,7 @@
 //! (their vertices), write as .xyz with round-trip-exact coordinates.
 
 use super::atomic::write_atomic;
-use super::text::{self, coord, out_err, parse_i64, show, strip_comment, Lines, Tokens};
+use super::text::{self, coord, out_err, parse_i64, show, Lines, Tokens};
 use super::{obj, off, ply};
 use crate::error::{Error, Result};
 use std::io::Write;
@@ -84,15 +84,15 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
     let mut declared: Option<(usize, usize)> = None;
     let mut first = true;
     for (ln, raw) in Lines::new(bytes) {
-        let mut toks = Tokens::with_commas(strip_comment(raw));
+        let mut toks = Tokens::with_commas(raw);
         let Some(t0) = toks.next() else { continue };
         if first {
             first = false;
             if toks.clone().next().is_none() {
                 // A lone first value: the `.pts` point count.
-                match parse_i64(t0) {
-                    Some(n) if n >= 0 => {
-                        declared = Some((n as usize, ln));
+                match parse_i64(t0).and_then(|n| usize::try_from(n).ok()) {
+                    Some(n) => {
+                        declared = Some((n, ln));
                         continue;
                     }
                     _ => {

@@ -751,9 +751,15 @@ pub fn random_shape_of(family: Family, rng: &mut Rng) -> QuadMesh {
                 grid(nu, nv, 1.0, aspect * nv as f64 / nu as f64)
             } else {
                 let bumps: Vec<[f64; 4]> = (0..1 + rng.below(5))
-                    .map(|_| [rng.f64(), rng.f64(), rng.uniform(0.05, 0.3), rng.uniform(-0.3, 0.3)])
+                    .map(|_| {
+                        // Height at most ~0.6 × width: slopes stay moderate, so quads are
+                        // not stretched beyond the edge ratios real meshes show (~0.2).
+                        let w = rng.uniform(0.08, 0.3);
+                        [rng.f64(), rng.f64(), w, rng.uniform(-0.6, 0.6) * w]
+                    })
                     .collect();
-                let (fx, fy, amp) = (rng.uniform(0.5, 3.0), rng.uniform(0.5, 3.0), rng.uniform(0.0, 0.1));
+                let (fx, fy) = (rng.uniform(0.5, 3.0), rng.uniform(0.5, 3.0));
+                let amp = rng.uniform(0.0, 0.4) / (std::f64::consts::TAU * fx.max(fy));
                 let mut h = height_field(nu, nv, |x, y| {
                     let mut z =
                         amp * (std::f64::consts::TAU * fx * x).sin() * (std::f64::consts::TAU * fy * y).cos();
@@ -789,8 +795,18 @@ pub fn random_shape_of(family: Family, rng: &mut Rng) -> QuadMesh {
             let nu = 24 + rng.below(52);
             let h = rng.uniform(0.5, 4.0);
             let circ = std::f64::consts::TAU / nu as f64;
-            let nv = ((h / (circ / aspect)).round() as usize).clamp(8, (4500 / nu).max(8));
-            cylinder(nu, nv, 1.0, h, family == Family::Cylinder)
+            let capped = family == Family::Cylinder;
+            // Vertices of the two caps (as `add_disk_cap` builds them) count towards the budget.
+            let (nu, caps) = if capped {
+                let (nu4, k) = (nu.div_ceil(4) * 4, nu.div_ceil(4));
+                let layers = (k as f64 * 0.35).round().max(1.0) as usize;
+                (nu4, 2 * ((k - 1) * (k - 1) + layers * nu4))
+            } else {
+                (nu, 0)
+            };
+            let max_nv = (4800usize.saturating_sub(caps) / nu).saturating_sub(1).max(8);
+            let nv = ((h / (circ / aspect)).round() as usize).clamp(8, max_nv);
+            cylinder(nu, nv, 1.0, h, capped)
         }
         Family::CageSmooth | Family::CageSharp => {
             let dims = [2 + rng.below(5), 2 + rng.below(5), 1 + rng.below(4)];

@@ -47,19 +47,35 @@ impl BatchNorm1d {
     ///
     /// # Errors
     /// `Error::InvalidInput` for a duplicate name, zero channels or a momentum outside [0, 1].
-    pub fn new(store: &mut ParamStore, name: &str, channels: usize, cfg: BatchNormConfig) -> Result<BatchNorm1d> {
+    pub fn new(
+        store: &mut ParamStore,
+        name: &str,
+        channels: usize,
+        cfg: BatchNormConfig,
+    ) -> Result<BatchNorm1d> {
         if channels == 0 {
             return Err(Error::invalid(format!("batch norm '{name}' with 0 channels")));
         }
-        if !(0.0..=1.0).contains(&cfg.momentum) || !(cfg.eps >= 0.0) {
-            return Err(Error::invalid(format!("batch norm '{name}': momentum {} / eps {}", cfg.momentum, cfg.eps)));
+        if !(0.0..=1.0).contains(&cfg.momentum) || cfg.eps.is_nan() || cfg.eps < 0.0 {
+            return Err(Error::invalid(format!(
+                "batch norm '{name}': momentum {} / eps {}",
+                cfg.momentum, cfg.eps
+            )));
         }
         let c = channels;
         Ok(BatchNorm1d {
             weight: store.add(&format!("{name}.weight"), ParamKind::Trainable, Tensor::full(&[c], 1.0)?)?,
             bias: store.add(&format!("{name}.bias"), ParamKind::Trainable, Tensor::zeros(&[c])?)?,
-            running_mean: store.add(&format!("{name}.running_mean"), ParamKind::Buffer, Tensor::zeros(&[c])?)?,
-            running_var: store.add(&format!("{name}.running_var"), ParamKind::Buffer, Tensor::full(&[c], 1.0)?)?,
+            running_mean: store.add(
+                &format!("{name}.running_mean"),
+                ParamKind::Buffer,
+                Tensor::zeros(&[c])?,
+            )?,
+            running_var: store.add(
+                &format!("{name}.running_var"),
+                ParamKind::Buffer,
+                Tensor::full(&[c], 1.0)?,
+            )?,
             channels,
             cfg,
         })
@@ -67,7 +83,12 @@ impl BatchNorm1d {
 
     /// The references the fused tape op needs.
     pub fn refs(&self) -> BnRefs {
-        BnRefs { running_mean: self.running_mean, running_var: self.running_var, eps: self.cfg.eps, momentum: self.cfg.momentum }
+        BnRefs {
+            running_mean: self.running_mean,
+            running_var: self.running_var,
+            eps: self.cfg.eps,
+            momentum: self.cfg.momentum,
+        }
     }
 
     /// Batch norm followed by `act`, one tape op.

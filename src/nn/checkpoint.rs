@@ -17,7 +17,7 @@
 
 use crate::tensor::{ParamStore, Tensor};
 use crate::{Error, Result};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// File magic.
 pub const MAGIC: [u8; 8] = *b"P2QCKPT\0";
@@ -83,7 +83,10 @@ struct Reader<'a> {
 
 impl<'a> Reader<'a> {
     fn err(&self, msg: impl Into<String>) -> Error {
-        Error::Checkpoint { path: self.path.to_path_buf(), msg: format!("{} (at byte {})", msg.into(), self.pos) }
+        Error::Checkpoint {
+            path: self.path.to_path_buf(),
+            msg: format!("{} (at byte {})", msg.into(), self.pos),
+        }
     }
     fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8]> {
         if n > self.b.len() - self.pos {
@@ -123,16 +126,22 @@ impl<'a> Reader<'a> {
         let mut numel: u64 = 1;
         for _ in 0..rank {
             let d = self.u64("dimension")?;
-            numel = numel.checked_mul(d).ok_or_else(|| self.err(format!("tensor '{name}' size overflows")))?;
+            numel =
+                numel.checked_mul(d).ok_or_else(|| self.err(format!("tensor '{name}' size overflows")))?;
             dims.push(d);
         }
         let left = (self.b.len() - self.pos) as u64;
         if numel.saturating_mul(4) > left {
-            return Err(self.err(format!("tensor '{name}' {dims:?} needs {} bytes, {left} left", numel.saturating_mul(4))));
+            return Err(self.err(format!(
+                "tensor '{name}' {dims:?} needs {} bytes, {left} left",
+                numel.saturating_mul(4)
+            )));
         }
         let dims: Vec<usize> = dims
             .iter()
-            .map(|&d| usize::try_from(d).map_err(|_| self.err(format!("tensor '{name}' dimension {d} too large"))))
+            .map(|&d| {
+                usize::try_from(d).map_err(|_| self.err(format!("tensor '{name}' dimension {d} too large")))
+            })
             .collect::<Result<_>>()?;
         let bytes = self.take(numel as usize * 4, "tensor data")?;
         let mut data = vec![0.0f32; numel as usize];
@@ -208,7 +217,10 @@ impl Checkpoint {
         let _reserved = r.u32("reserved")?;
         let total = r.u64("length")?;
         if total != bytes.len() as u64 {
-            return Err(err(format!("file is {} bytes but its header says {total} (truncated or padded)", bytes.len())));
+            return Err(err(format!(
+                "file is {} bytes but its header says {total} (truncated or padded)",
+                bytes.len()
+            )));
         }
         let body = &bytes[..bytes.len() - 8];
         let stored = u64::from_le(bytemuck::pod_read_unaligned(&bytes[bytes.len() - 8..]));
@@ -264,12 +276,19 @@ impl Checkpoint {
             }
             seen[id.0] = true;
             if store.get(id).shape() != t.shape() {
-                return Err(err(format!("tensor '{name}' is {} in the file, {} in the model", t.shape(), store.get(id).shape())));
+                return Err(err(format!(
+                    "tensor '{name}' is {} in the file, {} in the model",
+                    t.shape(),
+                    store.get(id).shape()
+                )));
             }
             ids.push(id);
         }
         if let Some(i) = seen.iter().position(|s| !s) {
-            return Err(err(format!("model tensor '{}' is missing from the file", store.name(crate::tensor::ParamId(i)))));
+            return Err(err(format!(
+                "model tensor '{}' is missing from the file",
+                store.name(crate::tensor::ParamId(i))
+            )));
         }
         for (id, (_, t)) in ids.into_iter().zip(&self.tensors) {
             store.get_mut(id).data_mut().copy_from_slice(t.data());
@@ -278,20 +297,15 @@ impl Checkpoint {
     }
 }
 
-/// Writes `ckpt` to `path` atomically (temporary file in the same folder, then rename).
+/// Writes `ckpt` to `path` atomically (`crate::io::atomic::write_atomic`: temporary
+/// file in the same folder, synced, then renamed), so a crash never leaves a
+/// half-written checkpoint.
 ///
 /// # Errors
 /// `Error::Io` naming the path.
 pub fn save(path: &Path, ckpt: &Checkpoint) -> Result<()> {
     let bytes = ckpt.to_bytes();
-    let mut tmp = PathBuf::from(path);
-    let fname = path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    tmp.set_file_name(format!(".{fname}.tmp{}", std::process::id()));
-    std::fs::write(&tmp, &bytes).map_err(|e| Error::io(&tmp, e))?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::io(path, e)
-    })
+    crate::io::atomic::write_atomic(path, |w| w.write_all(&bytes).map_err(|e| Error::io(path, e)))
 }
 
 /// Reads and checks a checkpoint file.

@@ -40,11 +40,19 @@ impl Conv1d {
     ///
     /// # Errors
     /// `Error::InvalidInput` for a duplicate name or a zero width.
-    pub fn new(store: &mut ParamStore, name: &str, cin: usize, cout: usize, bias: bool, rng: &mut Rng) -> Result<Conv1d> {
+    pub fn new(
+        store: &mut ParamStore,
+        name: &str,
+        cin: usize,
+        cout: usize,
+        bias: bool,
+        rng: &mut Rng,
+    ) -> Result<Conv1d> {
         if cin == 0 || cout == 0 {
             return Err(Error::invalid(format!("conv1d '{name}': widths must be positive ({cin} → {cout})")));
         }
-        let weight = store.add(&format!("{name}.weight"), ParamKind::Trainable, kaiming_uniform(cout, cin, rng)?)?;
+        let weight =
+            store.add(&format!("{name}.weight"), ParamKind::Trainable, kaiming_uniform(cout, cin, rng)?)?;
         let bias = if bias {
             let b = uniform(&[cout], 1.0 / (cin as f32).sqrt(), rng)?;
             Some(store.add(&format!("{name}.bias"), ParamKind::Trainable, b)?)
@@ -103,11 +111,12 @@ impl ConvBnAct {
             return Err(Error::invalid(format!("block '{name}': widths must be positive ({cin} → {cout})")));
         }
         if let Act::LeakyRelu(s) = act {
-            if !(s >= 0.0) {
+            if s.is_nan() || s < 0.0 {
                 return Err(Error::invalid(format!("block '{name}': leaky slope {s} must be ≥ 0")));
             }
         }
-        let weight = store.add(&format!("{name}.weight"), ParamKind::Trainable, kaiming_uniform(cout, cin, rng)?)?;
+        let weight =
+            store.add(&format!("{name}.weight"), ParamKind::Trainable, kaiming_uniform(cout, cin, rng)?)?;
         let bn = BatchNorm1d::new(store, &format!("{name}.bn"), cout, bn)?;
         Ok(ConvBnAct { weight, bn, act, cin, cout })
     }

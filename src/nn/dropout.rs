@@ -35,7 +35,8 @@ impl Dropout {
         }
         let shape = g.value(x).shape();
         let keep = 1.0 / (1.0 - self.p);
-        let mask: Vec<f32> = (0..shape.numel()).map(|_| if rng.f32() < self.p { 0.0 } else { keep }).collect();
+        let mask: Vec<f32> =
+            (0..shape.numel()).map(|_| if rng.f32() < self.p { 0.0 } else { keep }).collect();
         let m = g.input(Tensor::from_shape(shape, mask)?);
         g.mul(x, m)
     }

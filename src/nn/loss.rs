@@ -15,7 +15,10 @@ fn check(g: &Graph, logits: Var, labels: &[u8]) -> Result<usize> {
         return Err(Error::Shape { op: "loss", msg: format!("logits must be [M × 2], got {}", t.shape()) });
     }
     if t.rows() != labels.len() {
-        return Err(Error::Shape { op: "loss", msg: format!("{} logit rows for {} labels", t.rows(), labels.len()) });
+        return Err(Error::Shape {
+            op: "loss",
+            msg: format!("{} logit rows for {} labels", t.rows(), labels.len()),
+        });
     }
     if labels.is_empty() {
         return Err(Error::invalid("loss over zero candidates"));
@@ -34,7 +37,9 @@ fn check(g: &Graph, logits: Var, labels: &[u8]) -> Result<usize> {
 pub fn weighted_cross_entropy(g: &mut Graph, logits: Var, labels: &[u8], pos_weight: f32) -> Result<Var> {
     let m = check(g, logits, labels)?;
     if !(pos_weight > 0.0 && pos_weight.is_finite()) {
-        return Err(Error::invalid(format!("positive-class weight {pos_weight} must be positive and finite")));
+        return Err(Error::invalid(format!(
+            "positive-class weight {pos_weight} must be positive and finite"
+        )));
     }
     let mut mask = vec![0.0f32; 2 * m];
     let mut wsum = 0.0f64;

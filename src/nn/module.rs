@@ -78,7 +78,14 @@ impl ResidualBlock {
     ///
     /// # Errors
     /// As [`ConvBnAct::new`].
-    pub fn new(store: &mut ParamStore, name: &str, width: usize, act: Act, bn: BatchNormConfig, rng: &mut Rng) -> Result<Self> {
+    pub fn new(
+        store: &mut ParamStore,
+        name: &str,
+        width: usize,
+        act: Act,
+        bn: BatchNormConfig,
+        rng: &mut Rng,
+    ) -> Result<Self> {
         let a = ConvBnAct::new(store, &format!("{name}.a"), width, width, act, bn, rng)?;
         let b = ConvBnAct::new(store, &format!("{name}.b"), width, width, Act::Identity, bn, rng)?;
         Ok(ResidualBlock { a, b, act })

@@ -80,7 +80,7 @@ impl Sgd {
         if !ok(cfg.lr) || !ok(cfg.momentum) || cfg.momentum >= 1.0 || !ok(cfg.weight_decay) {
             return Err(Error::invalid(format!("bad SGD config {cfg:?}")));
         }
-        if cfg.clip.is_some_and(|c| !(c > 0.0)) || (cfg.nesterov && cfg.momentum == 0.0) {
+        if cfg.clip.is_some_and(|c| c.is_nan() || c <= 0.0) || (cfg.nesterov && cfg.momentum == 0.0) {
             return Err(Error::invalid(format!("bad SGD config {cfg:?}")));
         }
         Ok(Sgd { cfg, bufs: Vec::new(), steps: 0 })
@@ -103,11 +103,19 @@ impl Sgd {
                 if g.len() != params.get(id).len() {
                     return Err(Error::Shape {
                         op: "sgd",
-                        msg: format!("gradient {} for '{}' {}", g.shape(), params.name(id), params.get(id).shape()),
+                        msg: format!(
+                            "gradient {} for '{}' {}",
+                            g.shape(),
+                            params.name(id),
+                            params.get(id).shape()
+                        ),
                     });
                 }
                 if let Some(i) = g.data().iter().position(|v| !v.is_finite()) {
-                    return Err(Error::invalid(format!("non-finite gradient in '{}' at element {i}", params.name(id))));
+                    return Err(Error::invalid(format!(
+                        "non-finite gradient in '{}' at element {i}",
+                        params.name(id)
+                    )));
                 }
             }
         }
@@ -160,7 +168,9 @@ impl Sgd {
     pub fn set_buffers(&mut self, params: &ParamStore, bufs: &[(String, Tensor)], steps: u64) -> Result<()> {
         let mut new = vec![None; params.len()];
         for (name, t) in bufs {
-            let id = params.find(name).ok_or_else(|| Error::invalid(format!("momentum buffer for unknown '{name}'")))?;
+            let id = params
+                .find(name)
+                .ok_or_else(|| Error::invalid(format!("momentum buffer for unknown '{name}'")))?;
             if params.kind(id) != ParamKind::Trainable {
                 return Err(Error::invalid(format!("momentum buffer for non-trainable '{name}'")));
             }

@@ -27,7 +27,7 @@
 
 use std::collections::HashSet;
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use crate::error::{Error, Result};
 
@@ -371,25 +371,15 @@ pub fn read_sample(bytes: &[u8], source: &str) -> Result<Sample> {
     Ok(sample)
 }
 
-/// Writes `sample` to `path` atomically (a temporary file in the same folder, then a
-/// rename), so readers never see a half-written sample.
+/// Writes `sample` to `path` atomically ([`crate::io::atomic::write_atomic`]: a
+/// temporary file in the same folder, synced, then renamed), so readers never see a
+/// half-written sample.
 ///
 /// # Errors
-/// As [`write_sample`], or `Io` naming the path.
+/// As [`write_sample`] (checked before anything is written), or `Io` naming the path.
 pub fn save_sample(path: &Path, sample: &Sample) -> Result<()> {
-    let bytes = encode_sample(sample)?;
-    let file =
-        path.file_name().ok_or_else(|| Error::invalid(format!("{}: not a file path", path.display())))?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(file);
-    tmp_name.push(format!(".tmp{}", std::process::id()));
-    let tmp: PathBuf = path.with_file_name(tmp_name);
-    let result = std::fs::write(&tmp, &bytes).and_then(|_| std::fs::rename(&tmp, path));
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(Error::io(path, e));
-    }
-    Ok(())
+    sample.validate()?;
+    crate::io::atomic::write_atomic(path, |w| write_sample(w, sample))
 }
 
 /// Reads a sample written by [`save_sample`].

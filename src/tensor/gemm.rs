@@ -13,7 +13,7 @@ use crate::par;
 use nalgebra::{Dyn, MatrixView, MatrixViewMut};
 
 /// Rows of the output computed by one GEMM call in [`gemm_rows`].
-pub const ROW_BLOCK: usize = 256;
+pub const ROW_BLOCK: usize = 512;
 /// Rows of the reduction axis summed by one GEMM call in [`gemm_tn`].
 pub const RED_BLOCK: usize = 8192;
 
@@ -64,7 +64,17 @@ fn small_gemm(
 /// # Panics
 /// When a buffer is shorter than its dimensions say (internal invariant of callers).
 #[allow(clippy::too_many_arguments)]
-pub fn gemm(m: usize, n: usize, k: usize, a: &[f32], ta: bool, b: &[f32], tb: bool, c: &mut [f32], beta: f32) {
+pub fn gemm(
+    m: usize,
+    n: usize,
+    k: usize,
+    a: &[f32],
+    ta: bool,
+    b: &[f32],
+    tb: bool,
+    c: &mut [f32],
+    beta: f32,
+) {
     assert!(c.len() >= m * n, "internal error: gemm output buffer too small");
     if m == 0 || n == 0 {
         return;
@@ -80,9 +90,10 @@ pub fn gemm(m: usize, n: usize, k: usize, a: &[f32], ta: bool, b: &[f32], tb: bo
 }
 
 /// Like [`gemm`] but with `op(A)` given as a row block: rows `r0..r0+m` of an
-/// `M × k` operand (stored `M × k`, or `k × M` when `ta`, with `lda_t = M`).
+/// `M × k` operand (stored `M × k`, or `k × M` when `ta`, with `lda_t = M`); `c` is
+/// that block's `m × n` output.
 #[allow(clippy::too_many_arguments)]
-fn gemm_block(
+pub fn gemm_block(
     m: usize,
     n: usize,
     k: usize,
@@ -121,8 +132,21 @@ fn gemm_block(
 /// # Panics
 /// When a buffer is shorter than its dimensions say.
 #[allow(clippy::too_many_arguments)]
-pub fn gemm_rows(m: usize, n: usize, k: usize, a: &[f32], ta: bool, b: &[f32], tb: bool, c: &mut [f32], beta: f32) {
-    assert!(c.len() >= m * n && a.len() >= m * k && b.len() >= k * n, "internal error: gemm_rows buffer too small");
+pub fn gemm_rows(
+    m: usize,
+    n: usize,
+    k: usize,
+    a: &[f32],
+    ta: bool,
+    b: &[f32],
+    tb: bool,
+    c: &mut [f32],
+    beta: f32,
+) {
+    assert!(
+        c.len() >= m * n && a.len() >= m * k && b.len() >= k * n,
+        "internal error: gemm_rows buffer too small"
+    );
     if m == 0 || n == 0 {
         return;
     }

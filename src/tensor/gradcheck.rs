@@ -61,7 +61,8 @@ pub struct GradCheckReport {
 impl GradCheckReport {
     /// True when no element failed and few enough were skipped.
     pub fn passed(&self, cfg: &GradCheckConfig) -> bool {
-        self.failures.is_empty() && (self.skipped as f64) <= cfg.max_skip_frac * (self.checked + self.skipped) as f64
+        self.failures.is_empty()
+            && (self.skipped as f64) <= cfg.max_skip_frac * (self.checked + self.skipped) as f64
     }
 }
 
@@ -100,8 +101,11 @@ where
     let ids: Vec<_> = params.ids().filter(|&id| params.kind(id) == ParamKind::Trainable).collect();
     for id in ids {
         let n = params.get(id).len();
-        let picks: Vec<usize> =
-            if n <= cfg.max_per_param { (0..n).collect() } else { (0..cfg.max_per_param).map(|_| rng.below(n)).collect() };
+        let picks: Vec<usize> = if n <= cfg.max_per_param {
+            (0..n).collect()
+        } else {
+            (0..cfg.max_per_param).map(|_| rng.below(n)).collect()
+        };
         for j in picks {
             let analytic = grads.get(id).map_or(0.0, |t| t.data()[j]) as f64;
             let orig = params.get(id).data()[j];

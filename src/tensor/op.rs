@@ -172,7 +172,11 @@ impl Op {
     pub fn inputs(&self) -> Vec<Var> {
         match self {
             Op::Leaf => vec![],
-            Op::MatMul { a, b, .. } | Op::Add { a, b } | Op::Sub { a, b } | Op::Mul { a, b } | Op::Div { a, b } => {
+            Op::MatMul { a, b, .. }
+            | Op::Add { a, b }
+            | Op::Sub { a, b }
+            | Op::Mul { a, b }
+            | Op::Div { a, b } => {
                 vec![*a, *b]
             }
             Op::Scale { a, .. }

@@ -23,13 +23,17 @@ impl Shape {
     /// count overflows `usize`.
     pub fn new(dims: &[usize]) -> Result<Shape> {
         if dims.len() > MAX_RANK {
-            return Err(Error::Shape { op: "shape", msg: format!("rank {} > {MAX_RANK}: {dims:?}", dims.len()) });
+            return Err(Error::Shape {
+                op: "shape",
+                msg: format!("rank {} > {MAX_RANK}: {dims:?}", dims.len()),
+            });
         }
         let mut n: usize = 1;
         for &d in dims {
-            n = n
-                .checked_mul(d)
-                .ok_or_else(|| Error::Shape { op: "shape", msg: format!("element count of {dims:?} overflows") })?;
+            n = n.checked_mul(d).ok_or_else(|| Error::Shape {
+                op: "shape",
+                msg: format!("element count of {dims:?} overflows"),
+            })?;
         }
         let mut a = [0usize; MAX_RANK];
         a[..dims.len()].copy_from_slice(dims);

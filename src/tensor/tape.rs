@@ -104,15 +104,36 @@ fn broadcast(op: &'static str, a: Shape, b: Shape) -> Result<(Shape, Bc, Bc)> {
 
 /// Adds `f(flat, r, c)` for every output element into `dst`, summing over broadcast dims.
 fn acc_reduce(dst: &mut [f32], bc: Bc, rows: usize, cols: usize, f: impl Fn(usize, usize, usize) -> f32) {
-    if bc == Bc::Full {
-        for (i, d) in dst.iter_mut().enumerate().take(rows * cols) {
-            *d += f(i, i / cols.max(1), i % cols.max(1));
+    // Row-major loops with the broadcast kind matched once (no division per element).
+    match bc {
+        Bc::Full => {
+            for r in 0..rows {
+                let d = &mut dst[r * cols..(r + 1) * cols];
+                for (c, x) in d.iter_mut().enumerate() {
+                    *x += f(r * cols + c, r, c);
+                }
+            }
         }
-        return;
-    }
-    for r in 0..rows {
-        for c in 0..cols {
-            dst[bi(bc, r, c, cols)] += f(r * cols + c, r, c);
+        Bc::Row => {
+            for r in 0..rows {
+                for (c, x) in dst[..cols].iter_mut().enumerate() {
+                    *x += f(r * cols + c, r, c);
+                }
+            }
+        }
+        Bc::Col => {
+            for (r, x) in dst[..rows].iter_mut().enumerate() {
+                for c in 0..cols {
+                    *x += f(r * cols + c, r, c);
+                }
+            }
+        }
+        Bc::One => {
+            for r in 0..rows {
+                for c in 0..cols {
+                    dst[0] += f(r * cols + c, r, c);
+                }
+            }
         }
     }
 }
@@ -263,7 +284,10 @@ impl<'p> Graph<'p> {
         self.check_live("matmul", &[a, b])?;
         let (ta, tb) = (self.value(a), self.value(b));
         if ta.shape().rank() != 2 || tb.shape().rank() != 2 {
-            return Err(shape_err("matmul", format!("needs 2-D operands, got {} and {}", ta.shape(), tb.shape())));
+            return Err(shape_err(
+                "matmul",
+                format!("needs 2-D operands, got {} and {}", ta.shape(), tb.shape()),
+            ));
         }
         let (m, k) = (ta.dims()[0], ta.dims()[1]);
         let (k2, n) = if trans_b { (tb.dims()[1], tb.dims()[0]) } else { (tb.dims()[0], tb.dims()[1]) };
@@ -279,7 +303,13 @@ impl<'p> Graph<'p> {
         Ok(self.push(t, Op::MatMul { a, b, trans_b }))
     }
 
-    fn binary(&mut self, name: &'static str, a: Var, b: Var, f: impl Fn(f32, f32) -> f32) -> Result<(Tensor, ())> {
+    fn binary(
+        &mut self,
+        name: &'static str,
+        a: Var,
+        b: Var,
+        f: impl Fn(f32, f32) -> f32,
+    ) -> Result<(Tensor, ())> {
         self.check_live(name, &[a, b])?;
         let (ta, tb) = (self.value(a), self.value(b));
         let (shape, ca, cb) = broadcast(name, ta.shape(), tb.shape())?;
@@ -498,7 +528,11 @@ impl<'p> Graph<'p> {
         if let Some(p) = idx.iter().position(|&i| i as usize > lim || (!padded && n == 0)) {
             return Err(shape_err(
                 "gather_rows",
-                format!("index {} at position {p} out of range for {n} rows{}", idx[p], if padded { " (+shadow)" } else { "" }),
+                format!(
+                    "index {} at position {p} out of range for {n} rows{}",
+                    idx[p],
+                    if padded { " (+shadow)" } else { "" }
+                ),
             ));
         }
         let mut out = vec![0.0f32; idx.len() * c];
@@ -554,12 +588,15 @@ impl<'p> Graph<'p> {
         let t = self.value(a);
         let (n, c) = (t.rows(), t.cols());
         if k == 0 && !idx.is_empty() || k > 0 && idx.len() % k != 0 {
-            return Err(shape_err("max_neighbors", format!("{} indices is not a multiple of k = {k}", idx.len())));
+            return Err(shape_err(
+                "max_neighbors",
+                format!("{} indices is not a multiple of k = {k}", idx.len()),
+            ));
         }
         if let Some(p) = idx.iter().position(|&i| i as usize > n) {
             return Err(shape_err("max_neighbors", format!("index {} at {p} out of range 0..={n}", idx[p])));
         }
-        let n_out = if k == 0 { 0 } else { idx.len() / k };
+        let n_out = idx.len().checked_div(k).unwrap_or(0);
         let mut out = vec![0.0f32; n_out * c];
         let mut argmax = vec![n as u32; n_out * c];
         let d = t.data();
@@ -616,12 +653,20 @@ impl<'p> Graph<'p> {
     /// # Errors
     /// `Error::Shape` on mismatched widths, or fewer than 2 rows in train mode;
     /// `Error::InvalidInput` for a negative leaky slope.
-    pub fn conv_bn_act(&mut self, x: Var, w: Option<Var>, gamma: Var, beta: Var, bn: BnRefs, act: Act) -> Result<Var> {
+    pub fn conv_bn_act(
+        &mut self,
+        x: Var,
+        w: Option<Var>,
+        gamma: Var,
+        beta: Var,
+        bn: BnRefs,
+        act: Act,
+    ) -> Result<Var> {
         let mut vars = vec![x, gamma, beta];
         vars.extend(w);
         self.check_live("conv_bn_act", &vars)?;
         if let Act::LeakyRelu(s) = act {
-            if !(s >= 0.0) {
+            if s.is_nan() || s < 0.0 {
                 return Err(Error::invalid(format!("leaky slope {s} must be ≥ 0 in the fused block")));
             }
         }
@@ -634,7 +679,10 @@ impl<'p> Graph<'p> {
             Some(w) => {
                 let tw = self.value(w);
                 if tw.shape().rank() != 2 || tw.dims()[1] != cin {
-                    return Err(shape_err("conv_bn_act", format!("weight {} for input {}", tw.shape(), tx.shape())));
+                    return Err(shape_err(
+                        "conv_bn_act",
+                        format!("weight {} for input {}", tw.shape(), tx.shape()),
+                    ));
                 }
                 tw.dims()[0]
             }
@@ -642,7 +690,10 @@ impl<'p> Graph<'p> {
         };
         for (name, v) in [("gamma", gamma), ("beta", beta)] {
             if self.value(v).len() != cout {
-                return Err(shape_err("conv_bn_act", format!("{name} {} for {cout} channels", self.value(v).shape())));
+                return Err(shape_err(
+                    "conv_bn_act",
+                    format!("{name} {} for {cout} channels", self.value(v).shape()),
+                ));
             }
         }
         for id in [bn.running_mean, bn.running_var] {
@@ -654,15 +705,16 @@ impl<'p> Graph<'p> {
             }
         }
         if self.train && m < 2 {
-            return Err(shape_err("conv_bn_act", format!("batch norm in train mode needs ≥ 2 rows, got {m}")));
+            return Err(shape_err(
+                "conv_bn_act",
+                format!("batch norm in train mode needs ≥ 2 rows, got {m}"),
+            ));
         }
         let record = self.wants_grad(&vars);
-        let z = match w {
-            Some(w) => conv_bn::linear(tx.data(), m, cin, self.value(w).data(), cout),
-            None => tx.data().to_vec(),
-        };
-        let (mean, invstd) = if self.train {
-            let (mean, var) = conv_bn::batch_stats(&z, m, cout);
+        let wd = w.map(|w| self.value(w).data());
+        // Train mode: z and batch statistics (fused per row block), running update.
+        let (z, mean, invstd) = if self.train {
+            let (z, mean, var) = conv_bn::linear_stats(tx.data(), m, cin, wd, cout);
             let mom = bn.momentum;
             let unbias = m as f64 / (m as f64 - 1.0);
             let rm = self.params.get_mut(bn.running_mean).data_mut();
@@ -674,30 +726,42 @@ impl<'p> Graph<'p> {
                 *r = (1.0 - mom) * *r + mom * (b * unbias) as f32;
             }
             let eps = bn.eps as f64;
-            (
-                mean.iter().map(|&v| v as f32).collect::<Vec<f32>>(),
-                var.iter().map(|&v| (1.0 / (v + eps).sqrt()) as f32).collect::<Vec<f32>>(),
-            )
+            let invstd = var.iter().map(|&v| (1.0 / (v + eps).sqrt()) as f32).collect::<Vec<f32>>();
+            (Some(z), mean.iter().map(|&v| v as f32).collect::<Vec<f32>>(), invstd)
         } else {
             let rm = self.params.get(bn.running_mean).data().to_vec();
             let rv = self.params.get(bn.running_var).data();
-            (rm, rv.iter().map(|&v| (1.0 / (v as f64 + bn.eps as f64).sqrt()) as f32).collect())
+            (None, rm, rv.iter().map(|&v| (1.0 / (v as f64 + bn.eps as f64).sqrt()) as f32).collect())
         };
         let (g, b) = (self.value(gamma).data(), self.value(beta).data());
         let scale: Vec<f32> = (0..cout).map(|j| g[j] * invstd[j]).collect();
         let shift: Vec<f32> = (0..cout).map(|j| b[j] - mean[j] * scale[j]).collect();
-        let out_t;
-        if record {
-            let mut out = vec![0.0f32; m * cout];
-            conv_bn::affine_act(&z, &mut out, cout, &scale, &shift, act);
-            out_t = Tensor::new(&[m, cout], out)?;
-            let saved = ConvBnSaved { x, w, gamma, beta, act, batch_stats: self.train, z, mean, invstd };
-            Ok(self.push(out_t, Op::ConvBnAct(Box::new(saved))))
-        } else {
-            let mut z = z;
-            conv_bn::affine_act_inplace(&mut z, cout, &scale, &shift, act);
-            out_t = Tensor::new(&[m, cout], z)?;
-            Ok(self.push(out_t, Op::Leaf))
+        let wd = w.map(|w| self.value(w).data());
+        let xd = self.value(x).data();
+        let (out, z) = match (z, record) {
+            // Inference: one fused pass per row block, nothing saved.
+            (None, false) => (conv_bn::linear_affine_act(xd, m, cin, wd, cout, &scale, &shift, act), None),
+            (Some(mut z), false) => {
+                conv_bn::affine_act_inplace(&mut z, cout, &scale, &shift, act);
+                (z, None)
+            }
+            (z, true) => {
+                let z = match z {
+                    Some(z) => z,
+                    None => conv_bn::linear_stats(xd, m, cin, wd, cout).0,
+                };
+                let mut out = vec![0.0f32; m * cout];
+                conv_bn::affine_act(&z, &mut out, cout, &scale, &shift, act);
+                (out, Some(z))
+            }
+        };
+        let out_t = Tensor::new(&[m, cout], out)?;
+        match z {
+            Some(z) => {
+                let saved = ConvBnSaved { x, w, gamma, beta, act, batch_stats: self.train, z, mean, invstd };
+                Ok(self.push(out_t, Op::ConvBnAct(Box::new(saved))))
+            }
+            None => Ok(self.push(out_t, Op::Leaf)),
         }
     }
 
@@ -743,7 +807,10 @@ impl<'p> Graph<'p> {
         }
         self.check_live("backward", &[out])?;
         if self.value(out).shape() != seed.shape() {
-            return Err(shape_err("backward", format!("seed {} for output {}", seed.shape(), self.value(out).shape())));
+            return Err(shape_err(
+                "backward",
+                format!("seed {} for output {}", seed.shape(), self.value(out).shape()),
+            ));
         }
         self.spent = true;
         let mut g: Vec<Option<Tensor>> = (0..self.nodes.len()).map(|_| None).collect();
@@ -785,9 +852,11 @@ impl<'p> Graph<'p> {
                 if self.needs(b) {
                     let gb = grad_slot(g, b, tb.shape());
                     if trans_b {
-                        gemm::gemm_tn(n, k, m, gd, ta.data(), gb.data_mut(), 1.0); // ∂b = gᵀ·a
+                        gemm::gemm_tn(n, k, m, gd, ta.data(), gb.data_mut(), 1.0);
+                    // ∂b = gᵀ·a
                     } else {
-                        gemm::gemm_tn(k, n, m, ta.data(), gd, gb.data_mut(), 1.0); // ∂b = aᵀ·g
+                        gemm::gemm_tn(k, n, m, ta.data(), gd, gb.data_mut(), 1.0);
+                        // ∂b = aᵀ·g
                     }
                 }
             }
@@ -958,11 +1027,13 @@ impl<'p> Graph<'p> {
                         let tw = self.value(w);
                         if self.needs(w) {
                             let gw = grad_slot(g, w, tw.shape()).data_mut();
-                            gemm::gemm_tn(cout, cin, m, &gz, tx.data(), gw, 1.0); // ∂W = ∂zᵀ·x
+                            gemm::gemm_tn(cout, cin, m, &gz, tx.data(), gw, 1.0);
+                            // ∂W = ∂zᵀ·x
                         }
                         if self.needs(s.x) {
                             let gx = grad_slot(g, s.x, tx.shape()).data_mut();
-                            gemm::gemm_rows(m, cin, cout, &gz, false, tw.data(), false, gx, 1.0); // ∂x = ∂z·W
+                            gemm::gemm_rows(m, cin, cout, &gz, false, tw.data(), false, gx, 1.0);
+                            // ∂x = ∂z·W
                         }
                     }
                     None => {
@@ -979,12 +1050,18 @@ impl<'p> Graph<'p> {
                 let needs: Vec<bool> = inputs.iter().map(|&v| self.needs(v)).collect();
                 let res = op.backward(&vals, outv, &gout, &needs)?;
                 if res.len() != inputs.len() {
-                    return Err(shape_err(op.name(), format!("backward gave {} gradients for {} inputs", res.len(), inputs.len())));
+                    return Err(shape_err(
+                        op.name(),
+                        format!("backward gave {} gradients for {} inputs", res.len(), inputs.len()),
+                    ));
                 }
                 for ((&v, gi), val) in inputs.iter().zip(res).zip(&vals) {
                     if let (Some(gi), true) = (gi, self.needs(v)) {
                         if gi.len() != val.len() {
-                            return Err(shape_err(op.name(), format!("gradient {} for input {}", gi.shape(), val.shape())));
+                            return Err(shape_err(
+                                op.name(),
+                                format!("gradient {} for input {}", gi.shape(), val.shape()),
+                            ));
                         }
                         grad_slot(g, v, val.shape()).add_assign(&gi)?;
                     }

@@ -131,7 +131,10 @@ impl Tensor {
     /// `Error::Shape` when the tensor does not hold exactly one element.
     pub fn item(&self) -> Result<f32> {
         if self.data.len() != 1 {
-            return Err(Error::Shape { op: "item", msg: format!("tensor of shape {} is not a scalar", self.shape) });
+            return Err(Error::Shape {
+                op: "item",
+                msg: format!("tensor of shape {} is not a scalar", self.shape),
+            });
         }
         Ok(self.data[0])
     }

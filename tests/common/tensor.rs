@@ -33,7 +33,11 @@ pub fn off_kink(dims: &[usize], gap: f32, rng: &mut Rng) -> Tensor {
 /// A store holding each tensor as a trainable parameter named by its position.
 pub fn store_of(ts: Vec<Tensor>) -> (ParamStore, Vec<ParamId>) {
     let mut s = ParamStore::new();
-    let ids = ts.into_iter().enumerate().map(|(i, t)| s.add(&format!("in{i}"), ParamKind::Trainable, t).unwrap()).collect();
+    let ids = ts
+        .into_iter()
+        .enumerate()
+        .map(|(i, t)| s.add(&format!("in{i}"), ParamKind::Trainable, t).unwrap())
+        .collect();
     (s, ids)
 }
 
@@ -46,7 +50,13 @@ where
     let cfg = GradCheckConfig { train, seed, ..GradCheckConfig::default() };
     let rep = gradcheck(store, f, &cfg).expect("gradcheck ran");
     assert!(rep.checked > 0, "nothing checked");
-    assert!(rep.passed(&cfg), "gradient check failed: {} checked, {} skipped, {:?}", rep.checked, rep.skipped, rep.failures);
+    assert!(
+        rep.passed(&cfg),
+        "gradient check failed: {} checked, {} skipped, {:?}",
+        rep.checked,
+        rep.skipped,
+        rep.failures
+    );
 }
 
 /// Max absolute difference between two equal-length slices.

@@ -49,9 +49,37 @@ pub struct BnRefs {
     pub momentum: f32,
 }
 
+/// How a graph holds the parameter store: mutably (train mode updates batch-norm
+/// running statistics) or shared (inference on a model others may read too).
+enum Store<'p> {
+    Mut(&'p mut ParamStore),
+    Shared(&'p ParamStore),
+}
+
+impl std::ops::Deref for Store<'_> {
+    type Target = ParamStore;
+    fn deref(&self) -> &ParamStore {
+        match self {
+            Store::Mut(p) => p,
+            Store::Shared(p) => p,
+        }
+    }
+}
+
+impl std::ops::DerefMut for Store<'_> {
+    fn deref_mut(&mut self) -> &mut ParamStore {
+        match self {
+            Store::Mut(p) => p,
+            // Only `Graph::eval_shared` builds a shared store, and it is never in train
+            // mode, the one place that writes to the store.
+            Store::Shared(_) => unreachable!("internal error: a shared-store graph wrote to its parameters"),
+        }
+    }
+}
+
 /// The tape, borrowing the parameter store for its lifetime.
 pub struct Graph<'p> {
-    params: &'p mut ParamStore,
+    params: Store<'p>,
     nodes: Vec<Node>,
     record: bool,
     train: bool,
@@ -146,7 +174,7 @@ impl<'p> Graph<'p> {
     /// A graph over `params`. `record`: keep ops for `backward`; `train`: batch norm
     /// uses (and updates) batch statistics, dropout is active.
     pub fn new(params: &'p mut ParamStore, record: bool, train: bool) -> Graph<'p> {
-        Graph { params, nodes: Vec::new(), record, train, spent: false }
+        Graph { params: Store::Mut(params), nodes: Vec::new(), record, train, spent: false }
     }
 
     /// Training graph: records, batch statistics.
@@ -157,6 +185,12 @@ impl<'p> Graph<'p> {
     /// Inference graph ("no_grad"): records nothing, running statistics.
     pub fn eval(params: &'p mut ParamStore) -> Graph<'p> {
         Graph::new(params, false, false)
+    }
+
+    /// Inference graph over a shared store: like [`Graph::eval`], for a model that is
+    /// only borrowed (`reconstruct(&Model)`), or used from several threads at once.
+    pub fn eval_shared(params: &'p ParamStore) -> Graph<'p> {
+        Graph { params: Store::Shared(params), nodes: Vec::new(), record: false, train: false, spent: false }
     }
 
     /// True when ops are recorded for `backward`.
@@ -171,7 +205,7 @@ impl<'p> Graph<'p> {
 
     /// The parameter store.
     pub fn params(&self) -> &ParamStore {
-        self.params
+        &self.params
     }
 
     /// Number of nodes on the tape.

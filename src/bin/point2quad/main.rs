@@ -8,9 +8,13 @@ mod cmd_eval;
 mod cmd_reconstruct;
 mod cmd_render;
 mod cmd_repair;
+mod cmd_synth;
 mod cmd_train;
 
 use std::process::ExitCode;
+
+/// A subcommand's entry point.
+type RunFn = fn(&[String]) -> point2quad::Result<()>;
 
 const USAGE: &str = "\
 point2quad: point cloud -> pure-quad manifold mesh (Point2Quad, from scratch)
@@ -26,6 +30,7 @@ COMMANDS:
     train        --data DIR --out MODEL [--config default|paper] [--epochs N] [--resume CKPT]
     repair       MESH -o OUT.{obj,ply,off} post-process and hole-fill a quad mesh or face soup
     render       MESH -o OUT.svg           shaded SVG picture of a mesh
+    synth        -o CLOUD.xyz [--gt GT.obj] synthetic noisy cloud + ground-truth quad mesh
 ";
 
 fn main() -> ExitCode {
@@ -35,7 +40,7 @@ fn main() -> ExitCode {
         return ExitCode::from(2);
     };
     let rest = &argv[1..];
-    let (help, run): (&str, fn(&[String]) -> point2quad::Result<()>) = match cmd.as_str() {
+    let (help, run): (&str, RunFn) = match cmd.as_str() {
         "-h" | "--help" | "help" => {
             print!("{USAGE}");
             return ExitCode::SUCCESS;
@@ -51,6 +56,7 @@ fn main() -> ExitCode {
         "train" => (cmd_train::HELP, cmd_train::run),
         "repair" => (cmd_repair::HELP, cmd_repair::run),
         "render" => (cmd_render::HELP, cmd_render::run),
+        "synth" => (cmd_synth::HELP, cmd_synth::run),
         other => {
             eprintln!("point2quad: unknown command {other:?}\n\n{USAGE}");
             return ExitCode::from(2);

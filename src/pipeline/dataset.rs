@@ -30,6 +30,13 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::error::{Error, Result};
+use crate::mesh::poly::QuadMesh;
+use crate::mesh::shapes::{self, Family};
+use crate::pipeline::candidates::{self, CandidateConfig};
+use crate::pipeline::features;
+use crate::pipeline::frame::Frame;
+use crate::pipeline::noise::{noise_points, NoiseConfig};
+use crate::rng::Rng;
 
 /// File magic.
 pub const MAGIC: [u8; 4] = *b"P2QS";
@@ -389,6 +396,71 @@ pub fn save_sample(path: &Path, sample: &Sample) -> Result<()> {
 pub fn load_sample(path: &Path) -> Result<Sample> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     read_sample(&bytes, &path.display().to_string())
+}
+
+/// The random generator of sample `index` of a dataset made with `seed`: independent
+/// streams per index, so samples do not depend on each other or on thread scheduling.
+pub fn sample_rng(seed: u64, index: usize) -> Rng {
+    Rng::new(seed).fork(index as u64)
+}
+
+/// Synthetic sample `index` of a dataset made with `seed`: a name
+/// (`syn_<index>_<family>`) and a random shape from [`shapes::random_shape_of`], drawn
+/// from the start of [`sample_rng`]`(seed, index)`, which is returned for the noise.
+pub fn synthetic_mesh(seed: u64, index: usize) -> (String, QuadMesh, Rng) {
+    let mut rng = sample_rng(seed, index);
+    let family = Family::ALL[rng.below(Family::ALL.len())];
+    let mesh = shapes::random_shape_of(family, &mut rng);
+    (format!("syn_{index:05}_{}", family.name()), mesh, rng)
+}
+
+/// Builds a labelled sample from a ground-truth quad mesh: noise points appended after the
+/// mesh vertices ([`noise_points`]), the whole cloud normalised by [`Frame`], candidates
+/// from [`candidates::generate`], features [`features::f_info`], labels by
+/// [`label_candidates`].
+///
+/// # Errors
+/// `InvalidInput` for a mesh without faces, with out-of-range indices or non-finite
+/// vertices, and the errors of the noise, frame and candidate stages.
+pub fn build_sample(
+    name: &str,
+    mesh: &QuadMesh,
+    noise: &NoiseConfig,
+    cand_cfg: &CandidateConfig,
+    rng: &mut Rng,
+) -> Result<Sample> {
+    if mesh.quads.is_empty() {
+        return Err(Error::invalid(format!("{name}: the mesh has no faces")));
+    }
+    if mesh.vertices.len() > u32::MAX as usize {
+        return Err(Error::invalid(format!("{name}: too many vertices")));
+    }
+    let extra = noise_points(mesh, noise, rng).map_err(|e| Error::invalid(format!("{name}: {e}")))?;
+    let mut all = mesh.vertices.clone();
+    all.extend(extra);
+    let frame = Frame::fit(&all)?;
+    let points: Vec<[f32; 3]> = all.iter().map(|&p| frame.to_local(p)).collect();
+    let cands = candidates::generate(&points, cand_cfg)?;
+    let features = features::f_info(&points, &cands);
+    let labels = label_candidates(&cands.quads, &mesh.quads);
+    let sample = Sample {
+        name: name.to_string(),
+        points,
+        n_mesh_vertices: mesh.vertices.len() as u32,
+        gt_faces: mesh.quads.clone(),
+        candidates: cands.quads,
+        features,
+        feature_dim: features::F_INFO_DIM as u32,
+        labels,
+    };
+    sample.validate()?;
+    Ok(sample)
+}
+
+/// One line of a dataset's `index.txt`: file, points, candidates, positives, coverage
+/// (tab-separated; coverage with 4 decimals).
+pub fn index_line(file: &str, s: &Sample) -> String {
+    format!("{file}\t{}\t{}\t{}\t{:.4}", s.points.len(), s.candidates.len(), s.positives(), s.coverage())
 }
 
 #[cfg(test)]

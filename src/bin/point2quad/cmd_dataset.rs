@@ -1,11 +1,168 @@
-//! `point2quad dataset` (to be written).
+//! `point2quad dataset`: writes labelled training samples (`.p2qs`, format in
+//! `pipeline::dataset`) from random synthetic shapes and/or a folder of quad meshes,
+//! plus an `index.txt` summary. Deterministic for a seed; samples run in parallel.
 
-#[allow(unused_imports)]
-use crate::args::Args;
-use point2quad::{Error, Result};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
-pub const HELP: &str = "point2quad dataset: not available yet";
+use crate::args::{Args, Spec};
+use point2quad::io::mesh_io::read_mesh;
+use point2quad::mesh::poly::QuadMesh;
+use point2quad::pipeline::candidates::CandidateConfig;
+use point2quad::pipeline::dataset::{
+    build_sample, index_line, sample_rng, save_sample, synthetic_mesh, EXTENSION,
+};
+use point2quad::pipeline::noise::NoiseConfig;
+use point2quad::{par, Error, Result};
 
-pub fn run(_args: &[String]) -> Result<()> {
-    Err(Error::Usage("point2quad dataset: not implemented yet".into()))
+pub const HELP: &str = "\
+point2quad dataset: write labelled training samples (points, candidates, F_info, labels)
+
+USAGE:
+    point2quad dataset --out DIR [--synthetic N] [--meshes DIR] [--noise 0.1] [--seed S]
+
+OPTIONS:
+    --out DIR         output folder (created if missing): one <name>.p2qs per sample
+                      and index.txt (file, points, candidates, positives, coverage)
+    --synthetic N     N random synthetic quad meshes (all shape families, random pose)
+    --meshes DIR      every .obj/.off/.ply file directly in DIR (sorted by name)
+    --noise F         noise points per mesh vertex (default 0.1)
+    --offset F        largest noise offset along the face normal, as a fraction of
+                      the face's mean edge length (default 0.1)
+    --seed S          random seed (default 0); the same seed gives the same files
+
+At least one of --synthetic and --meshes is needed. A mesh that cannot be read or is
+not pure-quad is skipped with a warning naming it; the run fails if a sample cannot be
+written. Progress goes to stderr, one line per sample. Sample k (synthetic first, then
+the meshes in name order) uses its own random stream derived from the seed and k.
+";
+
+/// Where a sample comes from.
+enum Job {
+    Synthetic(usize),
+    /// A mesh file and the sample name to use for it.
+    File(PathBuf, String),
+}
+
+pub fn run(argv: &[String]) -> Result<()> {
+    const CMD: &str = "dataset";
+    let spec = Spec {
+        valued: &["--out", "--synthetic", "--meshes", "--noise", "--offset", "--seed"],
+        switches: &[],
+    };
+    let args = Args::parse(CMD, argv, &spec)?;
+    if !args.positional.is_empty() {
+        return Err(Error::Usage(format!(
+            "{CMD}: unexpected argument {:?} (see `point2quad {CMD} --help`)",
+            args.positional[0]
+        )));
+    }
+    let out = PathBuf::from(args.required(CMD, "--out")?);
+    let synthetic: usize = args.parsed(CMD, "--synthetic", 0)?;
+    let seed: u64 = args.parsed(CMD, "--seed", 0)?;
+    let noise = NoiseConfig {
+        fraction: args.parsed(CMD, "--noise", NoiseConfig::default().fraction)?,
+        offset: args.parsed(CMD, "--offset", NoiseConfig::default().offset)?,
+    };
+    for (name, v) in [("--noise", noise.fraction), ("--offset", noise.offset)] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(Error::Usage(format!("{CMD}: {name} must be a finite number >= 0, got {v}")));
+        }
+    }
+    let mut jobs: Vec<Job> = (0..synthetic).map(Job::Synthetic).collect();
+    if let Some(dir) = args.value("--meshes") {
+        let files = mesh_files(Path::new(dir))?;
+        let stems: Vec<String> =
+            files.iter().map(|p| sanitize(&p.file_stem().unwrap_or_default().to_string_lossy())).collect();
+        for (path, stem) in files.iter().zip(&stems) {
+            // `a.obj` and `a.off` side by side: keep both, named apart by extension.
+            let name = if stems.iter().filter(|s| *s == stem).count() > 1 {
+                let ext = path.extension().unwrap_or_default().to_string_lossy().to_ascii_lowercase();
+                format!("{stem}_{ext}")
+            } else {
+                stem.clone()
+            };
+            jobs.push(Job::File(path.clone(), name));
+        }
+    }
+    if jobs.is_empty() {
+        return Err(Error::Usage(format!(
+            "{CMD}: nothing to do: give --synthetic N (N > 0) and/or --meshes DIR with .obj/.off/.ply files"
+        )));
+    }
+    std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
+    let cand_cfg = CandidateConfig::default();
+    let total = jobs.len();
+    let done = AtomicUsize::new(0);
+    let results: Vec<Result<Option<String>>> = par::map(total, |k| {
+        let (name, mesh, mut rng) = match &jobs[k] {
+            Job::Synthetic(i) => synthetic_mesh(seed, *i),
+            Job::File(path, name) => match load_quads(path) {
+                Ok(mesh) => (name.clone(), mesh, sample_rng(seed, k)),
+                Err(msg) => {
+                    let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                    eprintln!("[{n}/{total}] warning: skipping {}: {msg}", path.display());
+                    return Ok(None);
+                }
+            },
+        };
+        let sample = build_sample(&name, &mesh, &noise, &cand_cfg, &mut rng)?;
+        let file = format!("{name}.{EXTENSION}");
+        save_sample(&out.join(&file), &sample)?;
+        let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+        eprintln!(
+            "[{n}/{total}] {name}: {} points, {} candidates, coverage {:.4}",
+            sample.points.len(),
+            sample.candidates.len(),
+            sample.coverage()
+        );
+        Ok(Some(index_line(&file, &sample)))
+    });
+    let mut index = String::from("# file\tpoints\tcandidates\tpositives\tcoverage\n");
+    let mut written = 0;
+    for r in results {
+        if let Some(line) = r? {
+            index.push_str(&line);
+            index.push('\n');
+            written += 1;
+        }
+    }
+    let index_path = out.join("index.txt");
+    point2quad::io::atomic::write_atomic(&index_path, |w| {
+        w.write_all(index.as_bytes()).map_err(|e| Error::io(&index_path, e))
+    })?;
+    eprintln!("dataset: {written} samples in {} ({} skipped)", out.display(), total - written);
+    Ok(())
+}
+
+/// The .obj/.off/.ply files directly in `dir`, sorted by name.
+fn mesh_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let entries = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
+    let mut files = Vec::new();
+    for entry in entries {
+        let path = entry.map_err(|e| Error::io(dir, e))?.path();
+        let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+        if path.is_file() && matches!(ext.as_deref(), Some("obj" | "off" | "ply")) {
+            files.push(path);
+        }
+    }
+    files.sort();
+    Ok(files)
+}
+
+/// Reads a mesh file as a pure-quad mesh; the message says why not.
+fn load_quads(path: &Path) -> std::result::Result<QuadMesh, String> {
+    let poly = read_mesh(path).map_err(|e| e.to_string())?;
+    poly.to_quads().map_err(|e| format!("not a pure-quad mesh ({e})"))
+}
+
+/// A file stem made safe as a sample (and file) name.
+fn sanitize(stem: &str) -> String {
+    let s: String =
+        stem.chars().map(|c| if c.is_alphanumeric() || "-_.".contains(c) { c } else { '_' }).collect();
+    if s.is_empty() {
+        "mesh".into()
+    } else {
+        s
+    }
 }

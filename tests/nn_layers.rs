@@ -48,9 +48,14 @@ fn bn_reference(g: &mut Graph, z: Var, gamma: Var, beta: Var, eps: f32) -> point
 /// cannot move a value across the kink).
 fn off_kinks(s: &mut ParamStore, blk: &ConvBnAct, x: point2quad::tensor::ParamId, train: bool) -> bool {
     let xt = s.get(x).clone();
+    off_kinks_at(s, blk, &xt, train)
+}
+
+/// [`off_kinks`] for an input given by value.
+fn off_kinks_at(s: &mut ParamStore, blk: &ConvBnAct, xt: &Tensor, train: bool) -> bool {
     let wt = s.get(blk.weight).clone();
     let mut g = Graph::new(s, false, train);
-    let (xv, w) = (g.param(x), g.param(blk.weight));
+    let (xv, w) = (g.input(xt.clone()), g.param(blk.weight));
     let (ga, be) = (g.param(blk.bn.weight), g.param(blk.bn.bias));
     let y = g.conv_bn_act(xv, Some(w), ga, be, blk.bn.refs(), Act::Identity).unwrap();
     let far = g.value(y).data().iter().all(|v| v.abs() > 0.05);
@@ -187,12 +192,19 @@ proptest! {
     }
 
     #[test]
-    fn residual_block_grads(m in 2usize..8, w in 1usize..5, seed in 0u64..1000) {
+    fn residual_block_grads(m in 3usize..8, w in 1usize..5, seed in 0u64..1000) {
         let mut rng = Rng::new(seed);
         let mut s = ParamStore::new();
         let blk = ResidualBlock::new(&mut s, "r", w, Act::LeakyRelu(0.1), BatchNormConfig::default(), &mut rng).unwrap();
         let x = s.add("x", ParamKind::Trainable, uniform(&[m, w], -1.0, 1.0, &mut rng)).unwrap();
         prop_assume!(off_kinks(&mut s, &blk.a, x, true));
+        let h = {
+            let mut g = Graph::new(&mut s, false, true);
+            let xv = g.param(x);
+            let h = blk.a.forward(&mut g, xv).unwrap();
+            g.value(h).clone()
+        };
+        prop_assume!(off_kinks_at(&mut s, &blk.b, &h, true));
         // The sum before the last activation must stay off 0 too.
         let sum_ok = {
             let mut g = Graph::new(&mut s, false, true);

@@ -416,7 +416,7 @@ pub fn synthetic_mesh(seed: u64, index: usize) -> (String, QuadMesh, Rng) {
 
 /// Builds a labelled sample from a ground-truth quad mesh: noise points appended after the
 /// mesh vertices ([`noise_points`]), the whole cloud normalised by [`Frame`], candidates
-/// from [`candidates::generate`], features [`features::f_info`], labels by
+/// from [`candidates::generate`], features [`features::face_input`] (F_info then the context features), labels by
 /// [`label_candidates`].
 ///
 /// # Errors
@@ -441,7 +441,7 @@ pub fn build_sample(
     let frame = Frame::fit(&all)?;
     let points: Vec<[f32; 3]> = all.iter().map(|&p| frame.to_local(p)).collect();
     let cands = candidates::generate(&points, cand_cfg)?;
-    let features = features::f_info(&points, &cands);
+    let features = features::face_input(&points, &cands, true);
     let labels = label_candidates(&cands.quads, &mesh.quads);
     let sample = Sample {
         name: name.to_string(),
@@ -450,7 +450,7 @@ pub fn build_sample(
         gt_faces: mesh.quads.clone(),
         candidates: cands.quads,
         features,
-        feature_dim: features::F_INFO_DIM as u32,
+        feature_dim: (features::F_INFO_DIM + features::CONTEXT_DIM) as u32,
         labels,
     };
     sample.validate()?;

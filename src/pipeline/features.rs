@@ -99,6 +99,23 @@ pub fn context_features(points: &[[f32; 3]], cands: &Candidates) -> Vec<f32> {
     out
 }
 
+/// The network input rows for `cands`: F_info, then (if `with_context`) the context
+/// features, `F_INFO_DIM (+ CONTEXT_DIM)` values per candidate.
+pub fn face_input(points: &[[f32; 3]], cands: &Candidates, with_context: bool) -> Vec<f32> {
+    let fi = f_info(points, cands);
+    if !with_context {
+        return fi;
+    }
+    let ctx = context_features(points, cands);
+    let m = cands.len();
+    let mut out = Vec::with_capacity(m * (F_INFO_DIM + CONTEXT_DIM));
+    for i in 0..m {
+        out.extend_from_slice(&fi[i * F_INFO_DIM..(i + 1) * F_INFO_DIM]);
+        out.extend_from_slice(&ctx[i * CONTEXT_DIM..(i + 1) * CONTEXT_DIM]);
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -7,8 +7,8 @@
 
 use crate::mesh::poly::QuadMesh;
 use crate::mesh::postprocess::{postprocess, PostprocessConfig, PostprocessReport};
-use crate::pipeline::candidates::{generate, CandidateConfig, Candidates};
-use crate::pipeline::features::{context_features, f_info, CONTEXT_DIM, F_INFO_DIM};
+use crate::pipeline::candidates::{generate, CandidateConfig};
+use crate::pipeline::features::face_input;
 use crate::pipeline::frame::Frame;
 use crate::pipeline::model::Model;
 use crate::{Error, Result};
@@ -56,23 +56,6 @@ pub struct ReconstructReport {
     pub vertices_added: usize,
     /// (stage, seconds), in pipeline order.
     pub timings: Vec<(&'static str, f64)>,
-}
-
-/// The network input rows for `cands`: F_info, then (if `with_context`) the context
-/// features, `F_INFO_DIM (+ CONTEXT_DIM)` values per candidate.
-pub fn face_input(points: &[[f32; 3]], cands: &Candidates, with_context: bool) -> Vec<f32> {
-    let fi = f_info(points, cands);
-    if !with_context {
-        return fi;
-    }
-    let ctx = context_features(points, cands);
-    let m = cands.len();
-    let mut out = Vec::with_capacity(m * (F_INFO_DIM + CONTEXT_DIM));
-    for i in 0..m {
-        out.extend_from_slice(&fi[i * F_INFO_DIM..(i + 1) * F_INFO_DIM]);
-        out.extend_from_slice(&ctx[i * CONTEXT_DIM..(i + 1) * CONTEXT_DIM]);
-    }
-    out
 }
 
 /// Point cloud → pure-quad manifold mesh with `model`.

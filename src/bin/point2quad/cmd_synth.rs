@@ -3,7 +3,7 @@
 //! written as ground truth. Used by `make demo` and handy for trying the tool.
 
 use crate::args::{Args, Spec};
-use point2quad::io::mesh_io::write_mesh;
+use point2quad::io::mesh_io::{read_mesh, write_mesh};
 use point2quad::io::points::write_points_xyz;
 use point2quad::mesh::poly::PolyMesh;
 use point2quad::mesh::shapes::{random_shape, random_shape_of, Family};
@@ -17,6 +17,7 @@ point2quad synth: a synthetic quad mesh as a noisy point cloud + its ground trut
 
 USAGE:
     point2quad synth -o CLOUD.xyz [--gt GT.{obj,ply,off}] [OPTIONS]
+    point2quad synth --from MESH -o CLOUD.xyz [--noise F] [--offset F] [--seed S]
 
 The cloud holds the mesh's vertices, then round(noise × #vertices) noise points, each
 on a random face (area-weighted) moved along its normal by up to offset × the face's
@@ -25,6 +26,7 @@ mean edge length.
 OPTIONS:
     -o CLOUD.xyz          output point cloud (required)
     --gt FILE             also write the ground-truth quad mesh
+    --from MESH           use this pure-quad mesh (.obj/.off/.ply) instead of a generated one
     --shape NAME          random, grid, height_field, cube, cube_sphere, torus, tube,
                           cylinder, cage_smooth, cage_sharp [random]
     --seed S              random seed [0]
@@ -33,7 +35,7 @@ OPTIONS:
 ";
 
 const SPEC: Spec =
-    Spec { valued: &["-o", "--gt", "--shape", "--seed", "--noise", "--offset"], switches: &[] };
+    Spec { valued: &["-o", "--from", "--gt", "--shape", "--seed", "--noise", "--offset"], switches: &[] };
 
 pub fn run(argv: &[String]) -> Result<()> {
     let cmd = "synth";
@@ -45,7 +47,13 @@ pub fn run(argv: &[String]) -> Result<()> {
         NoiseConfig { fraction: a.parsed(cmd, "--noise", 0.1)?, offset: a.parsed(cmd, "--offset", 0.1)? };
     let mut rng = Rng::new(seed);
     let shape = a.value("--shape").unwrap_or("random");
-    let mesh = if shape == "random" {
+    let mesh = if let Some(from) = a.value("--from") {
+        if a.value("--shape").is_some() {
+            return Err(Error::Usage(format!("{cmd}: give --from or --shape, not both")));
+        }
+        let poly = read_mesh(Path::new(from))?;
+        poly.to_quads().map_err(|e| Error::invalid(format!("{from}: {e}")))?
+    } else if shape == "random" {
         random_shape(&mut rng)
     } else {
         let fam = Family::ALL.iter().copied().find(|f| f.name() == shape).ok_or_else(|| {
@@ -59,6 +67,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     if let Some(gt) = a.value("--gt") {
         write_mesh(Path::new(gt), &PolyMesh::from(&mesh))?;
     }
+    let shape = a.value("--from").unwrap_or(shape);
     eprintln!(
         "synth: {shape} (seed {seed}): {} vertices, {} quads, {} noise points -> {out}",
         mesh.vertices.len(),

@@ -18,7 +18,7 @@ for f in "$DIR"/*.obj "$DIR"/*.off "$DIR"/*.ply; do
     t1=$(date +%s.%N)
     json=$("$BIN" eval "$OUT/$name.obj" --gt "$f" --json)
     gt=$("$BIN" eval "$f" --json)
-    echo "{\"name\": \"$name\", \"seconds\": $(echo "$t1 - $t0" | bc), \"pred\": $json, \"gt\": $gt}" >> "$JSONL"
+    echo "{\"name\": \"$name\", \"seconds\": $(python3 -c "print(round($t1 - $t0, 3))"), \"pred\": $json, \"gt\": $gt}" >> "$JSONL"
   else
     echo "{\"name\": \"$name\", \"failed\": true}" >> "$JSONL"
     cat "$OUT/$name.log" >&2

@@ -158,10 +158,19 @@ pub(crate) fn parse_i64(tok: &[u8]) -> Option<i64> {
     Some(if neg { -v } else { v })
 }
 
-/// A token for an error message: lossy UTF-8, cut to a readable length.
+/// A token for an error message: lossy UTF-8, control characters escaped (a binary
+/// file must not send terminal escape sequences to the user's stderr), cut to a
+/// readable length.
 pub(crate) fn show(tok: &[u8]) -> String {
     const MAX: usize = 40;
-    let s = String::from_utf8_lossy(&tok[..tok.len().min(MAX)]).into_owned();
+    let mut s = String::new();
+    for c in String::from_utf8_lossy(&tok[..tok.len().min(MAX)]).chars() {
+        if c.is_control() {
+            s.extend(c.escape_default());
+        } else {
+            s.push(c);
+        }
+    }
     if tok.len() > MAX {
         format!("{s}…")
     } else {
@@ -270,6 +279,16 @@ mod tests {
             assert_eq!(back.to_bits(), x.to_bits(), "{x} -> {}", String::from_utf8_lossy(&buf));
             assert!(buf.len() < 26, "{}", String::from_utf8_lossy(&buf));
         }
+    }
+
+    /// Regression: garbage bytes were echoed raw into error messages, so a binary
+    /// file could send terminal escape sequences (ESC, BEL, CR) to stderr.
+    #[test]
+    fn show_escapes_control_bytes_from_garbage() {
+        let s = show(b"a\x1b[2Jb\x07\r\x00\xff");
+        assert!(!s.chars().any(char::is_control), "{s:?}");
+        assert!(s.starts_with("a\\u{1b}[2Jb"), "{s:?}");
+        assert_eq!(show(b"plain"), "plain");
     }
 
     #[test]

@@ -600,3 +600,39 @@ fn paths_with_odd_characters_are_named_as_given() {
     let j = finite_json(&p2q_in(Some(&dir.0), &["eval", "--json", "--", "-dash.obj"]), "after --");
     assert_eq!(get(&j, "vertices"), 1.0);
 }
+
+/// Regression: `point2quad eval x.obj | true` panicked ("failed printing to stdout:
+/// Broken pipe"). The reader closes its end before eval has read its (large) input,
+/// so the write meets a broken pipe; the output must end quietly, without a panic.
+#[test]
+fn closed_stdout_pipe_is_not_a_panic() {
+    let dir = Scratch::new("pipe");
+    let n = 200u32;
+    let mut s = String::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            s.push_str(&format!("v {i} {j} 0\n"));
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let v = |a: u32, b: u32| b * (n + 1) + a + 1;
+            s.push_str(&format!("f {} {} {} {}\n", v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)));
+        }
+    }
+    let input = dir.write("big.obj", s.as_bytes());
+    for args in [vec!["eval", input.as_str()], vec!["eval", input.as_str(), "--json"], vec!["eval", "--help"]]
+    {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_point2quad"))
+            .args(&args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("test: run the binary");
+        drop(child.stdout.take());
+        let out = child.wait_with_output().expect("test: wait");
+        let err = stderr(&out);
+        assert!(!err.contains("panicked") && !err.contains("Broken pipe"), "{args:?}: {err}");
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {err}");
+    }
+}

@@ -52,9 +52,9 @@ pub fn run(argv: &[String]) -> Result<()> {
         None => None,
     };
     if args.switch("--json") {
-        println!("{}", to_json(&metrics, gt.as_ref()));
+        crate::output::stdout(&format!("{}\n", to_json(&metrics, gt.as_ref())))?;
     } else {
-        print!("{}", to_table(pred_path, &metrics, gt.as_ref()));
+        crate::output::stdout(&to_table(pred_path, &metrics, gt.as_ref()))?;
     }
     Ok(())
 }

@@ -73,11 +73,11 @@ pub fn run(argv: &[String]) -> Result<()> {
             return Err(e);
         }
     }
-    eprintln!(
-        "synth: {shape} (seed {seed}): {} vertices, {} quads, {} noise points -> {out}",
+    crate::output::stderr(&format!(
+        "synth: {shape} (seed {seed}): {} vertices, {} quads, {} noise points -> {out}\n",
         mesh.vertices.len(),
         mesh.quads.len(),
         cloud.len() - mesh.vertices.len()
-    );
+    ));
     Ok(())
 }

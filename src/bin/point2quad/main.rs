@@ -10,6 +10,7 @@ mod cmd_render;
 mod cmd_repair;
 mod cmd_synth;
 mod cmd_train;
+mod output;
 
 use std::process::ExitCode;
 
@@ -36,17 +37,17 @@ COMMANDS:
 fn main() -> ExitCode {
     let argv: Vec<String> = std::env::args().skip(1).collect();
     let Some(cmd) = argv.first() else {
-        eprint!("{USAGE}");
+        output::stderr(USAGE);
         return ExitCode::from(2);
     };
     let rest = &argv[1..];
     let (help, run): (&str, RunFn) = match cmd.as_str() {
         "-h" | "--help" | "help" => {
-            print!("{USAGE}");
+            let _ = output::stdout(USAGE);
             return ExitCode::SUCCESS;
         }
         "-V" | "--version" => {
-            println!("point2quad {}", env!("CARGO_PKG_VERSION"));
+            let _ = output::stdout(&format!("point2quad {}\n", env!("CARGO_PKG_VERSION")));
             return ExitCode::SUCCESS;
         }
         "reconstruct" => (cmd_reconstruct::HELP, cmd_reconstruct::run),
@@ -58,18 +59,18 @@ fn main() -> ExitCode {
         "render" => (cmd_render::HELP, cmd_render::run),
         "synth" => (cmd_synth::HELP, cmd_synth::run),
         other => {
-            eprintln!("point2quad: unknown command {other:?}\n\n{USAGE}");
+            output::stderr(&format!("point2quad: unknown command {other:?}\n\n{USAGE}\n"));
             return ExitCode::from(2);
         }
     };
     if rest.iter().any(|a| a == "-h" || a == "--help") {
-        print!("{help}");
+        let _ = output::stdout(help);
         return ExitCode::SUCCESS;
     }
     match run(rest) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("point2quad {cmd}: error: {e}");
+            output::stderr(&format!("point2quad {cmd}: error: {e}\n"));
             match e {
                 point2quad::Error::Usage(_) => ExitCode::from(2),
                 _ => ExitCode::from(1),

@@ -636,3 +636,20 @@ fn closed_stdout_pipe_is_not_a_panic() {
         assert_eq!(out.status.code(), Some(0), "{args:?}: {err}");
     }
 }
+
+/// Regression: classic Mac line endings (CR only) made an OBJ one long line: one
+/// vertex, no face, and no error.
+#[test]
+fn cr_only_line_endings_read_every_line() {
+    let dir = Scratch::new("cr");
+    let obj = dir.write("cr.obj", b"v 0 0 0\rv 1 0 0\rv 1 1 0\rv 0 1 0\rf 1 2 3 4\r");
+    let off = dir.write("cr.off", b"OFF\r4 1 0\r0 0 0\r1 0 0\r1 1 0\r0 1 0\r4 0 1 2 3\r");
+    for input in [obj, off] {
+        let j = finite_json(&p2q(&["eval", &input, "--json"]), &input);
+        assert_eq!(
+            (get(&j, "vertices"), get(&j, "faces"), get(&j, "scaled_jacobian")),
+            (4.0, 1.0, 1.0),
+            "{input}"
+        );
+    }
+}

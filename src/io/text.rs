@@ -44,6 +44,19 @@ impl<'a> Iterator for Lines<'a> {
     }
 }
 
+/// The text with classic Mac line endings (a lone `\r`) turned into `\n`, when it
+/// has no `\n` at all; otherwise the text as is. Without this a CR-only file reads
+/// as one long line, and the formats that ignore extra columns (OBJ, .xyz) would
+/// silently keep its first vertex only. Only for text formats: never for a file
+/// that may hold binary data.
+pub(crate) fn cr_lines(bytes: &[u8]) -> std::borrow::Cow<'_, [u8]> {
+    if find_byte(bytes, b'\n').is_none() && find_byte(bytes, b'\r').is_some() {
+        std::borrow::Cow::Owned(bytes.iter().map(|&b| if b == b'\r' { b'\n' } else { b }).collect())
+    } else {
+        std::borrow::Cow::Borrowed(bytes)
+    }
+}
+
 /// Position of the first `needle` in `hay`. Eight bytes at a time (the classic
 /// "has zero byte" word trick): lines are short, but a 1 MB file has 25k of them,
 /// and a byte-at-a-time loop was a fifth of the parse time.
@@ -217,6 +230,13 @@ mod tests {
         assert_eq!(v, vec![(1, &b"a"[..]), (2, &b"b"[..]), (3, &b""[..]), (4, &b"c"[..])]);
         assert_eq!(Lines::new(b"a\n").count(), 1);
         assert_eq!(Lines::new(b"").count(), 0);
+    }
+
+    #[test]
+    fn cr_only_text_becomes_lines() {
+        assert_eq!(&*cr_lines(b"a\rb\r"), b"a\nb\n");
+        assert_eq!(&*cr_lines(b"a\r\nb\r"), b"a\r\nb\r");
+        assert!(matches!(cr_lines(b"a b"), std::borrow::Cow::Borrowed(_)));
     }
 
     #[test]

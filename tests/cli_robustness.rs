@@ -653,3 +653,23 @@ fn cr_only_line_endings_read_every_line() {
         );
     }
 }
+
+/// Regression: a mesh with a split seam (repeated positions, as exporters write at UV
+/// seams) scored precision and recall 0.5 against itself.
+#[test]
+fn split_seam_mesh_matches_itself() {
+    let dir = Scratch::new("seam");
+    let seam = [
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [2.0, 0.0, 0.0],
+        [2.0, 1.0, 0.0],
+        [1.0, 1.0, 0.0],
+    ];
+    let input = dir.write("seam.obj", &obj_text(&seam, &[&[0, 1, 2, 3], &[4, 5, 6, 7]]));
+    let j = finite_json(&p2q(&["eval", &input, "--gt", &input, "--json"]), "seam");
+    assert_eq!((get(&j, "precision"), get(&j, "recall")), (1.0, 1.0));
+}

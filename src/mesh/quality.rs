@@ -452,7 +452,8 @@ fn mean_nearest(from: &[[f64; 3]], to: &[[f64; 3]]) -> f64 {
 /// floor, not 0), and face precision/recall with vertices matched within
 /// [`MATCH_TOLERANCE`] × the ground truth's bounding-box diagonal. A predicted face
 /// counts when its vertices match distinct ground-truth vertices that are exactly the
-/// vertex set of a ground-truth face; a ground-truth face counts as recalled when
+/// vertex set of a ground-truth face (ground-truth vertices at one position, within the
+/// tolerance, count as one vertex: split seams do not hide faces); a ground-truth face counts as recalled when
 /// some counted predicted face has its vertex set.
 ///
 /// # Errors
@@ -506,16 +507,30 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
     let gt32: Vec<[f32; 3]> = gt_pts.iter().map(|&p| crate::math::to_f32(p)).collect();
     let tree = KdTree::build(&gt32);
     let tol_sq = MATCH_TOLERANCE * MATCH_TOLERANCE;
+    // Ground-truth vertices at one position (within the tolerance) are one vertex for
+    // the face match: meshes exported with split seams repeat positions, and a face
+    // of the prediction cannot say which copy it meant. Each maps to the smallest
+    // index at its position (the f32 search is wide; f64 decides).
+    let search_sq = (4.0 * tol_sq) as f32;
+    let canon: Vec<u32> = crate::par::map(gt_pts.len(), |i| {
+        let mut near = Vec::new();
+        tree.within_radius(crate::math::to_f32(gt_pts[i]), search_sq, &mut near);
+        near.iter()
+            .map(|n| n.index)
+            .filter(|&j| crate::math::dist_sq(gt_pts[i], gt_pts[j as usize]) <= tol_sq)
+            .min()
+            .map_or(i as u32, |j| j.min(i as u32))
+    });
     let matched: Vec<Option<u32>> = crate::par::map(pred_f.vertices.len(), |i| {
         let p = pred_f.vertices[i];
         let nb = tree.nearest(crate::math::to_f32(p))?;
-        (crate::math::dist_sq(p, gt_pts[nb.index as usize]) <= tol_sq).then_some(nb.index)
+        (crate::math::dist_sq(p, gt_pts[nb.index as usize]) <= tol_sq).then(|| canon[nb.index as usize])
     });
     let matched_vertices = matched.iter().filter(|m| m.is_some()).count();
 
     let mut gt_faces: HashMap<Vec<u32>, Vec<usize>> = HashMap::with_capacity(gt.faces.len());
     for (i, f) in gt.faces.iter().enumerate() {
-        let mut key = f.clone();
+        let mut key: Vec<u32> = f.iter().map(|&v| canon.get(v as usize).copied().unwrap_or(v)).collect();
         key.sort_unstable();
         gt_faces.entry(key).or_default().push(i);
     }
@@ -718,6 +733,37 @@ mod tests {
         let m = mesh_metrics(&PolyMesh { vertices, faces });
         assert_eq!((m.nonmanifold_edges, m.edges, m.boundary_edges, m.nonmanifold_vertices), (1, 10, 9, 0));
         assert!(close(m.manifoldness, 0.9) && close(m.watertightness, 0.0));
+    }
+
+    /// Regression: a mesh with a split seam (two vertices at one position, one per
+    /// side) scored precision and recall 0.5 against itself: the prediction's copy
+    /// was matched to the other copy, so the second face's vertex set did not match.
+    #[test]
+    fn duplicate_ground_truth_vertices_do_not_hide_faces() {
+        let m = PolyMesh {
+            vertices: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [2.0, 0.0, 0.0],
+                [2.0, 1.0, 0.0],
+                [1.0, 1.0, 0.0],
+            ],
+            faces: vec![vec![0, 1, 2, 3], vec![4, 5, 6, 7]],
+        };
+        let r = compare(&m, &m, 0).unwrap();
+        assert_eq!((r.precision, r.recall, r.matched_vertices), (1.0, 1.0, 8));
+        // Welded prediction against the split ground truth: the same faces.
+        let mut welded = m.clone();
+        welded.vertices.truncate(6);
+        welded.vertices.push([2.0, 1.0, 0.0]);
+        welded.faces[1] = vec![1, 4, 6, 2];
+        welded.vertices[4] = [2.0, 0.0, 0.0];
+        welded.vertices[5] = [9.0, 9.0, 9.0];
+        let r = compare(&welded, &m, 0).unwrap();
+        assert_eq!((r.precision, r.recall), (1.0, 1.0));
     }
 
     #[test]

@@ -673,3 +673,22 @@ fn split_seam_mesh_matches_itself() {
     let j = finite_json(&p2q(&["eval", &input, "--gt", &input, "--json"]), "seam");
     assert_eq!((get(&j, "precision"), get(&j, "recall")), (1.0, 1.0));
 }
+
+/// Regression: a file name that is not valid UTF-8 made `std::env::args` panic.
+#[cfg(unix)]
+#[test]
+fn non_utf8_argument_is_a_usage_error() {
+    use std::os::unix::ffi::OsStrExt;
+    let dir = Scratch::new("argv");
+    let name = std::ffi::OsStr::from_bytes(b"\xffmesh.obj");
+    let path = dir.0.join(name);
+    if std::fs::write(&path, b"v 0 0 0\n").is_err() {
+        return; // a file system that refuses such names cannot hold this case
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_point2quad"))
+        .arg("eval")
+        .arg(&path)
+        .output()
+        .expect("test: run the binary");
+    assert_fails(&out, 2, &["argument 2", "mesh.obj", "not valid UTF-8"], "non-UTF-8 argument");
+}

@@ -35,7 +35,22 @@ COMMANDS:
 ";
 
 fn main() -> ExitCode {
-    let argv: Vec<String> = std::env::args().skip(1).collect();
+    // `std::env::args` panics on an argument that is not valid Unicode (a file name
+    // with Latin-1 bytes, say); refuse it with a message instead.
+    let mut argv: Vec<String> = Vec::new();
+    for (i, a) in std::env::args_os().skip(1).enumerate() {
+        match a.into_string() {
+            Ok(s) => argv.push(s),
+            Err(raw) => {
+                output::stderr(&format!(
+                    "point2quad: argument {} ({}) is not valid UTF-8; rename the file or use another path to it\n",
+                    i + 1,
+                    raw.to_string_lossy()
+                ));
+                return ExitCode::from(2);
+            }
+        }
+    }
     let Some(cmd) = argv.first() else {
         output::stderr(USAGE);
         return ExitCode::from(2);

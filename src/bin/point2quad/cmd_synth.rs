@@ -3,8 +3,8 @@
 //! written as ground truth. Used by `make demo` and handy for trying the tool.
 
 use crate::args::{Args, Spec};
-use point2quad::io::mesh_io::{read_mesh, write_mesh};
-use point2quad::io::points::write_points_xyz;
+use point2quad::io::mesh_io::{read_mesh, write_mesh, MeshFormat};
+use point2quad::io::points::{write_points_xyz, PointFormat};
 use point2quad::mesh::poly::PolyMesh;
 use point2quad::mesh::shapes::{random_shape, random_shape_of, Family};
 use point2quad::pipeline::noise::{noise_points, NoiseConfig};
@@ -42,6 +42,16 @@ pub fn run(argv: &[String]) -> Result<()> {
     let a = Args::parse(cmd, argv, &SPEC)?;
     a.expect_positional(cmd, 0, "no positional arguments")?;
     let out = a.required(cmd, "-o")?;
+    // Check every output name before writing anything, so that a bad --gt does not
+    // leave a cloud behind (and a .ply cloud is not written as .xyz text).
+    if PointFormat::from_path(Path::new(out))? != PointFormat::Xyz {
+        return Err(Error::Usage(format!(
+            "{cmd}: {out}: the cloud is written as text; use .xyz, .txt or .pts (see `point2quad {cmd} --help`)"
+        )));
+    }
+    if let Some(gt) = a.value("--gt") {
+        MeshFormat::from_path(Path::new(gt))?;
+    }
     let seed = a.parsed(cmd, "--seed", 0u64)?;
     let noise =
         NoiseConfig { fraction: a.parsed(cmd, "--noise", 0.1)?, offset: a.parsed(cmd, "--offset", 0.1)? };
@@ -65,14 +75,18 @@ pub fn run(argv: &[String]) -> Result<()> {
     cloud.extend(noise_points(&mesh, &noise, &mut rng)?);
     write_points_xyz(Path::new(out), &cloud)?;
     if let Some(gt) = a.value("--gt") {
-        write_mesh(Path::new(gt), &PolyMesh::from(&mesh))?;
+        if let Err(e) = write_mesh(Path::new(gt), &PolyMesh::from(&mesh)) {
+            // Half a result is worse than none: the cloud without its ground truth goes.
+            let _ = std::fs::remove_file(out);
+            return Err(e);
+        }
     }
     let shape = a.value("--from").unwrap_or(shape);
-    eprintln!(
-        "synth: {shape} (seed {seed}): {} vertices, {} quads, {} noise points -> {out}",
+    crate::output::stderr(&format!(
+        "synth: {shape} (seed {seed}): {} vertices, {} quads, {} noise points -> {out}\n",
         mesh.vertices.len(),
         mesh.quads.len(),
         cloud.len() - mesh.vertices.len()
-    );
+    ));
     Ok(())
 }

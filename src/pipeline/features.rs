@@ -1,1 +1,147 @@
-//! (to be written)
+//! Per-candidate input features of the face encoder: the paper's 29-value F_info
+//! (DESIGN §2) and a cheap per-candidate context (DESIGN §8: +5 precision / +7.5
+//! recall in the reference prototype). Both are row-major, one row per candidate,
+//! in the order of `Candidates::quads`.
+
+use crate::pipeline::candidates::{quad_geom, Candidates};
+
+/// Width of an F_info row.
+pub const F_INFO_DIM: usize = 29;
+
+/// Width of a context row (columns documented at [`context_features`]).
+pub const CONTEXT_DIM: usize = 16;
+
+/// F_info of every candidate, `M × 29` row-major. For the corners p_0..p_3 in the
+/// candidate's cyclic order, with e_i = p_{i+1} − p_i and c_i = e_{i−1} × e_i:
+///
+/// * columns 0–11: (p_i − p_0) / s for i = 0..3 (so columns 0–2 are zero), where s is
+///   the mean local spacing (`Candidates::spacing`) of the four corners — scale-free;
+/// * column 12: scaled Jacobian, min_i (c_i · n) / (|e_{i−1}||e_i|) with
+///   n = normalize((p_2 − p_0) × (p_3 − p_1));
+/// * columns 13–16: corner sines |c_i| / (|e_{i−1}||e_i|);
+/// * columns 17–28: unit corner normals c_i / |c_i| (x, y, z per corner).
+///
+/// Degenerate corners (never produced by `generate`) give a zero sine and normal.
+pub fn f_info(points: &[[f32; 3]], cands: &Candidates) -> Vec<f32> {
+    let mut out = vec![0.0f32; cands.quads.len() * F_INFO_DIM];
+    crate::par::for_each_chunk_mut(&mut out, F_INFO_DIM * 256, |ci, chunk| {
+        for (r, row) in chunk.chunks_mut(F_INFO_DIM).enumerate() {
+            let q = cands.quads[ci * 256 + r];
+            let p = q.map(|v| points[v as usize]);
+            let s = q.iter().map(|&v| cands.spacing[v as usize]).sum::<f32>() / 4.0;
+            let inv = if s > 0.0 { 1.0 / s } else { 1.0 };
+            for i in 0..4 {
+                for a in 0..3 {
+                    row[3 * i + a] = (p[i][a] - p[0][a]) * inv;
+                }
+            }
+            let g = quad_geom(p);
+            row[12] = g.jacobian;
+            row[13..17].copy_from_slice(&g.sine);
+            for i in 0..4 {
+                row[17 + 3 * i..20 + 3 * i].copy_from_slice(&g.corner_normal[i]);
+            }
+        }
+    });
+    out
+}
+
+/// Undirected edge key.
+#[inline]
+fn edge_key(a: u32, b: u32) -> u64 {
+    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+    ((lo as u64) << 32) | hi as u64
+}
+
+/// Context of every candidate, `M × CONTEXT_DIM` row-major. Columns:
+///
+/// * 0–3: how many *other* candidates contain edge i (p_i, p_{i+1}) — a true edge has
+///   few competitors on each side;
+/// * 4: the candidate's best 0-based rank among the lists of the points that kept it
+///   (`Candidates::rank`);
+/// * 5: how many of its corners kept it (`Candidates::proposers`, 1–4);
+/// * 6–9: length of edge i over the mean local spacing of its two endpoints;
+/// * 10–13: dot product of corner i's PCA normal (`Candidates::normals`) with the face
+///   normal n = normalize((p_2 − p_0) × (p_3 − p_1)) — agreement with the surface;
+/// * 14: the inside count of the ranking (`Candidates::inside`): other points
+///   projecting into the quad near its plane;
+/// * 15: the ranking score (`Candidates::score`, lower is better).
+pub fn context_features(points: &[[f32; 3]], cands: &Candidates) -> Vec<f32> {
+    let mut edges: Vec<u64> = Vec::with_capacity(cands.quads.len() * 4);
+    for q in &cands.quads {
+        for i in 0..4 {
+            edges.push(edge_key(q[i], q[(i + 1) % 4]));
+        }
+    }
+    edges.sort_unstable();
+    let count = |k: u64| edges.partition_point(|&e| e <= k) - edges.partition_point(|&e| e < k);
+    let mut out = vec![0.0f32; cands.quads.len() * CONTEXT_DIM];
+    crate::par::for_each_chunk_mut(&mut out, CONTEXT_DIM * 256, |ci, chunk| {
+        for (r, row) in chunk.chunks_mut(CONTEXT_DIM).enumerate() {
+            let c = ci * 256 + r;
+            let q = cands.quads[c];
+            let p = q.map(|v| points[v as usize]);
+            let g = quad_geom(p);
+            for i in 0..4 {
+                let (a, b) = (q[i], q[(i + 1) % 4]);
+                row[i] = (count(edge_key(a, b)) - 1) as f32;
+                let s = 0.5 * (cands.spacing[a as usize] + cands.spacing[b as usize]);
+                row[6 + i] = if s > 0.0 { g.len[i] / s } else { 0.0 };
+                let nv = cands.normals[q[i] as usize];
+                row[10 + i] = nv[0] * g.normal[0] + nv[1] * g.normal[1] + nv[2] * g.normal[2];
+            }
+            row[4] = cands.rank[c] as f32;
+            row[5] = cands.proposers[c] as f32;
+            row[14] = cands.inside[c] as f32;
+            row[15] = cands.score[c];
+        }
+    });
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::candidates::{generate, CandidateConfig};
+
+    #[test]
+    fn square_has_textbook_features() {
+        // A 6 × 6 unit grid: interior cells are unit squares.
+        let mut pts = Vec::new();
+        for y in 0..6 {
+            for x in 0..6 {
+                pts.push([x as f32 + 0.01 * ((x * 7 + y * 3) % 5) as f32, y as f32, 0.0]);
+            }
+        }
+        let c = generate(&pts, &CandidateConfig::default()).unwrap();
+        let f = f_info(&pts, &c);
+        let ctx = context_features(&pts, &c);
+        assert_eq!(f.len(), c.len() * F_INFO_DIM);
+        assert_eq!(ctx.len(), c.len() * CONTEXT_DIM);
+        // Find the cell with corners 14, 15, 21, 20 (all spacings ≈ 1).
+        let want = [14u32, 15, 20, 21];
+        let ci = c
+            .quads
+            .iter()
+            .position(|q| {
+                let mut k = *q;
+                k.sort_unstable();
+                k == want
+            })
+            .expect("cell present");
+        let row = &f[ci * F_INFO_DIM..(ci + 1) * F_INFO_DIM];
+        assert!(row[..3].iter().all(|&x| x == 0.0));
+        assert!(row[12] > 0.99, "jacobian {}", row[12]);
+        assert!(row[13..17].iter().all(|&s| s > 0.99));
+        for i in 0..4 {
+            let n = &row[17 + 3 * i..20 + 3 * i];
+            assert!((n[2].abs() - 1.0).abs() < 1e-4);
+            // Counter-clockwise about the (oriented) point normal.
+            assert!(n[2] * c.normals[14][2] > 0.0);
+        }
+        let crow = &ctx[ci * CONTEXT_DIM..(ci + 1) * CONTEXT_DIM];
+        assert!(crow[6..10].iter().all(|&l| (l - 1.0).abs() < 0.05), "{crow:?}");
+        assert!(crow[10..14].iter().all(|&d| d > 0.99));
+        assert!(crow[5] >= 1.0 && crow[5] <= 4.0);
+    }
+}

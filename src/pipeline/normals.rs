@@ -1,1 +1,302 @@
-//! (to be written)
+//! Point normals from the points alone: PCA of each point's k nearest neighbours
+//! (the eigenvector of the smallest covariance eigenvalue), then a consistent sign by
+//! propagation over the kNN graph (Hoppe et al. 1992): a minimum spanning tree on the
+//! weight 1 − |n_i·n_j|, grown by Prim from one root per connected component, so the
+//! sign travels along the smoothest paths first.
+//!
+//! Outward rule, per connected component: the point farthest from the component's
+//! centroid (ties broken by coordinates) gets the normal pointing away from that
+//! centroid; when its normal is perpendicular to that direction (a flat patch) the
+//! normal's largest-magnitude coordinate is made positive instead.
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+use crate::spatial::kdtree::KnnTable;
+
+/// Number of neighbours per point stored in `knn` (robust to a table whose `k`
+/// field disagrees with its length).
+fn row_len(points: usize, knn: &KnnTable) -> usize {
+    knn.indices.len().checked_div(points).unwrap_or(0)
+}
+
+/// Unit normal of each point by PCA of its row of `knn` (the row may include the
+/// point itself; duplicates are harmless). Degenerate neighbourhoods (fewer than 3
+/// distinct points, collinear) still get a unit vector, perpendicular to the line
+/// when there is one, else `[0, 0, 1]`. The sign is arbitrary; see [`orient_normals`].
+///
+/// # Panics
+/// Never for finite input; `knn` must hold rows for every point with indices
+/// `< points.len()` (an internal invariant of the pipeline: it is built from `points`).
+pub fn estimate_normals(points: &[[f32; 3]], knn: &KnnTable) -> Vec<[f32; 3]> {
+    let k = row_len(points.len(), knn);
+    crate::par::map(points.len(), |i| {
+        let row = &knn.indices[i * k..(i + 1) * k];
+        pca_normal(points, points[i], row)
+    })
+}
+
+/// PCA normal of the point `center` and the points `row` index (in f64: the
+/// covariance of a tight neighbourhood loses digits in f32).
+pub(crate) fn pca_normal(points: &[[f32; 3]], center: [f32; 3], row: &[u32]) -> [f32; 3] {
+    let mut mean = [0.0f64; 3];
+    let mut n = 0.0f64;
+    for &j in row {
+        let p = points[j as usize];
+        for a in 0..3 {
+            mean[a] += (p[a] - center[a]) as f64;
+        }
+        n += 1.0;
+    }
+    if n < 3.0 {
+        return [0.0, 0.0, 1.0];
+    }
+    for m in &mut mean {
+        *m /= n;
+    }
+    let mut c = [[0.0f64; 3]; 3];
+    for &j in row {
+        let p = points[j as usize];
+        let d = [
+            (p[0] - center[0]) as f64 - mean[0],
+            (p[1] - center[1]) as f64 - mean[1],
+            (p[2] - center[2]) as f64 - mean[2],
+        ];
+        for a in 0..3 {
+            for b in a..3 {
+                c[a][b] += d[a] * d[b];
+            }
+        }
+    }
+    let m = nalgebra::Matrix3::new(
+        c[0][0], c[0][1], c[0][2], c[0][1], c[1][1], c[1][2], c[0][2], c[1][2], c[2][2],
+    );
+    let trace = c[0][0] + c[1][1] + c[2][2];
+    if trace.is_nan() || trace <= 0.0 || !trace.is_finite() {
+        return [0.0, 0.0, 1.0];
+    }
+    let eig = nalgebra::SymmetricEigen::new(m);
+    let mut imin = 0;
+    for a in 1..3 {
+        if eig.eigenvalues[a] < eig.eigenvalues[imin] {
+            imin = a;
+        }
+    }
+    let v = eig.eigenvectors.column(imin);
+    let len = v.norm();
+    if len.is_nan() || len <= 0.0 || !len.is_finite() {
+        return [0.0, 0.0, 1.0];
+    }
+    [(v[0] / len) as f32, (v[1] / len) as f32, (v[2] / len) as f32]
+}
+
+#[inline]
+fn dot3(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Symmetrised kNN graph in compressed rows (self-loops dropped, duplicates removed).
+fn symmetric_graph(n: usize, knn: &KnnTable) -> (Vec<usize>, Vec<u32>) {
+    let k = row_len(n, knn);
+    let mut deg = vec![0usize; n + 1];
+    for i in 0..n {
+        for &j in &knn.indices[i * k..(i + 1) * k] {
+            if j as usize != i {
+                deg[i] += 1;
+                deg[j as usize] += 1;
+            }
+        }
+    }
+    let mut start = vec![0usize; n + 1];
+    for i in 0..n {
+        start[i + 1] = start[i] + deg[i];
+    }
+    let mut fill = start.clone();
+    let mut adj = vec![0u32; start[n]];
+    for i in 0..n {
+        for &j in &knn.indices[i * k..(i + 1) * k] {
+            let j = j as usize;
+            if j != i {
+                adj[fill[i]] = j as u32;
+                fill[i] += 1;
+                adj[fill[j]] = i as u32;
+                fill[j] += 1;
+            }
+        }
+    }
+    // Sort and de-duplicate each row in place, then compact.
+    let mut out_start = vec![0usize; n + 1];
+    let mut out = Vec::with_capacity(adj.len());
+    for i in 0..n {
+        let row = &mut adj[start[i]..start[i + 1]];
+        row.sort_unstable();
+        let mut last = u32::MAX;
+        for &j in row.iter() {
+            if j != last {
+                out.push(j);
+                last = j;
+            }
+        }
+        out_start[i + 1] = out.len();
+    }
+    (out_start, out)
+}
+
+/// Lexicographic "greater" on coordinates, for tie-breaks that do not depend on
+/// point indices.
+fn coord_gt(a: [f32; 3], b: [f32; 3]) -> bool {
+    a.iter().zip(b.iter()).map(|(x, y)| x.total_cmp(y)).find(|o| o.is_ne())
+        == Some(std::cmp::Ordering::Greater)
+}
+
+/// Flips normals so that neighbours agree in sign: Prim's minimum spanning tree on
+/// 1 − |n_i·n_j| over the symmetrised kNN graph, one tree per connected component,
+/// each rooted and oriented by the outward rule in the module header. A child takes
+/// the sign that makes its dot product with its tree parent non-negative.
+///
+/// # Panics
+/// If `normals.len() != points.len()` (internal error: both come from the same cloud).
+pub fn orient_normals(points: &[[f32; 3]], knn: &KnnTable, normals: &mut [[f32; 3]]) {
+    let n = points.len();
+    assert_eq!(normals.len(), n, "internal error: one normal per point");
+    if n == 0 {
+        return;
+    }
+    let (start, adj) = symmetric_graph(n, knn);
+    // Components by breadth-first search.
+    let mut comp = vec![u32::MAX; n];
+    let mut comps: Vec<Vec<u32>> = Vec::new();
+    for s in 0..n {
+        if comp[s] != u32::MAX {
+            continue;
+        }
+        let id = comps.len() as u32;
+        let mut members = vec![s as u32];
+        comp[s] = id;
+        let mut head = 0;
+        while head < members.len() {
+            let v = members[head] as usize;
+            head += 1;
+            for &w in &adj[start[v]..start[v + 1]] {
+                if comp[w as usize] == u32::MAX {
+                    comp[w as usize] = id;
+                    members.push(w);
+                }
+            }
+        }
+        comps.push(members);
+    }
+    let mut done = vec![false; n];
+    let mut heap: BinaryHeap<Reverse<(u32, u32, u32)>> = BinaryHeap::new();
+    for members in &comps {
+        let mut c = [0.0f64; 3];
+        for &v in members {
+            for a in 0..3 {
+                c[a] += points[v as usize][a] as f64;
+            }
+        }
+        let c = [
+            (c[0] / members.len() as f64) as f32,
+            (c[1] / members.len() as f64) as f32,
+            (c[2] / members.len() as f64) as f32,
+        ];
+        let mut root = members[0] as usize;
+        let mut best = -1.0f32;
+        for &v in members {
+            let p = points[v as usize];
+            let d = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
+            let r = dot3(d, d);
+            if r > best || (r == best && coord_gt(p, points[root])) {
+                best = r;
+                root = v as usize;
+            }
+        }
+        let p = points[root];
+        let d = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
+        let nr = normals[root];
+        let s = dot3(nr, d);
+        let flip = if s.abs() > 1e-3 * dot3(d, d).sqrt() {
+            s < 0.0
+        } else {
+            let mut big = 0;
+            for a in 1..3 {
+                if nr[a].abs() > nr[big].abs() {
+                    big = a;
+                }
+            }
+            nr[big] < 0.0
+        };
+        if flip {
+            normals[root] = [-nr[0], -nr[1], -nr[2]];
+        }
+        // Prim: the heap holds (weight bits, target, parent). Weights are ≥ 0, so
+        // their f32 bit patterns order like the values.
+        done[root] = true;
+        let push = |heap: &mut BinaryHeap<_>, v: usize, normals: &[[f32; 3]], done: &[bool]| {
+            for &w in &adj[start[v]..start[v + 1]] {
+                if !done[w as usize] {
+                    let wt = (1.0 - dot3(normals[v], normals[w as usize]).abs()).max(0.0);
+                    heap.push(Reverse((wt.to_bits(), w, v as u32)));
+                }
+            }
+        };
+        push(&mut heap, root, normals, &done);
+        while let Some(Reverse((_, w, parent))) = heap.pop() {
+            let w = w as usize;
+            if done[w] {
+                continue;
+            }
+            done[w] = true;
+            if dot3(normals[w], normals[parent as usize]) < 0.0 {
+                let m = normals[w];
+                normals[w] = [-m[0], -m[1], -m[2]];
+            }
+            push(&mut heap, w, normals, &done);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::spatial::kdtree::KdTree;
+
+    fn sphere(n: usize) -> Vec<[f32; 3]> {
+        // Fibonacci sphere: evenly spread, no ties.
+        let ga = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        (0..n)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let r = (1.0 - z * z).sqrt();
+                let t = ga * i as f64;
+                [(r * t.cos()) as f32, (r * t.sin()) as f32, z as f32]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn sphere_normals_are_radial_and_outward() {
+        let pts = sphere(800);
+        let knn = KdTree::build(&pts).knn_batch(&pts, 12);
+        let mut nrm = estimate_normals(&pts, &knn);
+        orient_normals(&pts, &knn, &mut nrm);
+        for (p, n) in pts.iter().zip(&nrm) {
+            assert!((dot3(*n, *n) - 1.0).abs() < 1e-5);
+            assert!(dot3(*p, *n) > 0.98, "normal {n:?} at {p:?} not outward radial");
+        }
+    }
+
+    #[test]
+    fn degenerate_neighbourhoods_give_unit_vectors() {
+        // Collinear and duplicated points.
+        let mut pts: Vec<[f32; 3]> = (0..10).map(|i| [i as f32, 0.0, 0.0]).collect();
+        pts.extend(std::iter::repeat([3.0, 0.0, 0.0]).take(5));
+        let knn = KdTree::build(&pts).knn_batch(&pts, 6);
+        let mut nrm = estimate_normals(&pts, &knn);
+        orient_normals(&pts, &knn, &mut nrm);
+        for n in &nrm {
+            assert!((dot3(*n, *n) - 1.0).abs() < 1e-5);
+            assert!(n[0].abs() < 1e-4, "normal {n:?} not perpendicular to the line");
+        }
+    }
+}

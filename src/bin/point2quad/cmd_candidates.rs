@@ -1,11 +1,82 @@
-//! `point2quad candidates` (to be written).
+//! `point2quad candidates`: candidate quads of a point cloud, one per line as 4
+//! zero-based input indices in cyclic order (DESIGN §2, §6).
 
-#[allow(unused_imports)]
-use crate::args::Args;
+use crate::args::{Args, Spec};
+use point2quad::pipeline::candidates::{generate, CandidateConfig};
+use point2quad::pipeline::frame::Frame;
 use point2quad::{Error, Result};
 
-pub const HELP: &str = "point2quad candidates: not available yet";
+/// `--help` text.
+pub const HELP: &str = "\
+point2quad candidates: candidate quads of a point cloud (from the points alone)
 
-pub fn run(_args: &[String]) -> Result<()> {
-    Err(Error::Usage("point2quad candidates: not implemented yet".into()))
+USAGE:
+    point2quad candidates INPUT -o CAND.txt [--k K] [--per-point P]
+
+ARGS:
+    INPUT            points: .xyz/.txt (x y z columns), .ply, .obj (v lines), .off
+
+OPTIONS:
+    -o, --output F   where to write the candidates: one per line, 4 zero-based input
+                     point indices in cyclic order (counter-clockwise about the
+                     estimated outward normal)
+    --k K            neighbours searched per point (default 20; at least 3)
+    --per-point P    candidates kept per proposing point before de-duplication
+                     (default 32; at least 1)
+    -h, --help       this text
+
+A summary (points, candidates, candidates per point, time) goes to stderr.
+";
+
+/// Runs the subcommand.
+///
+/// # Errors
+/// Usage errors for bad arguments, I/O and parse errors from reading or writing,
+/// `InvalidInput` for clouds that cannot give candidates (fewer than 4 points, NaN).
+pub fn run(argv: &[String]) -> Result<()> {
+    const CMD: &str = "candidates";
+    let spec = Spec { valued: &["-o", "--output", "--k", "--per-point"], switches: &[] };
+    let args = Args::parse(CMD, argv, &spec)?;
+    let input = &args.expect_positional(CMD, 1, "one INPUT file")?[0];
+    let output = match args.value("-o").or(args.value("--output")) {
+        Some(o) => o.to_string(),
+        None => {
+            return Err(Error::Usage(format!("{CMD}: missing -o CAND.txt (see `point2quad {CMD} --help`)")))
+        }
+    };
+    let mut cfg = CandidateConfig::default();
+    cfg.k = args.parsed(CMD, "--k", cfg.k)?;
+    cfg.per_point = args.parsed(CMD, "--per-point", cfg.per_point)?;
+    if cfg.k < 3 {
+        return Err(Error::Usage(format!("{CMD}: --k must be at least 3, got {}", cfg.k)));
+    }
+    if cfg.per_point < 1 {
+        return Err(Error::Usage(format!("{CMD}: --per-point must be at least 1")));
+    }
+    let t0 = std::time::Instant::now();
+    let points = point2quad::io::points::read_points(std::path::Path::new(input))?;
+    let t_read = t0.elapsed();
+    let frame = Frame::fit(&points).map_err(|e| Error::invalid(format!("{input}: {e}")))?;
+    let local = frame.to_local_all(&points);
+    let t1 = std::time::Instant::now();
+    let cands = generate(&local, &cfg).map_err(|e| Error::invalid(format!("{input}: {e}")))?;
+    let t_gen = t1.elapsed();
+    let mut text = String::with_capacity(cands.quads.len() * 24);
+    for q in &cands.quads {
+        use std::fmt::Write;
+        let _ = writeln!(text, "{} {} {} {}", q[0], q[1], q[2], q[3]);
+    }
+    point2quad::io::atomic::write_atomic(std::path::Path::new(&output), |w| {
+        w.write_all(text.as_bytes()).map_err(|e| point2quad::Error::io(&output, e))
+    })?;
+    eprintln!(
+        "candidates: {} points, {} candidates ({:.2} per point), read {:.3} s, generate {:.3} s -> {}",
+        points.len(),
+        cands.quads.len(),
+        cands.quads.len() as f64 / points.len() as f64,
+        t_read.as_secs_f64(),
+        t_gen.as_secs_f64(),
+        output
+    );
+    Ok(())
 }

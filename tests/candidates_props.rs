@@ -1,0 +1,192 @@
+//! Property tests of candidate generation and F_info against independent f64
+//! recomputations and invariances: index validity, uniqueness, convex counter-
+//! clockwise order, value ranges, rigid-motion / uniform-scale invariance, and
+//! invariance under a permutation of the input. Clouds are jittered wavy grids,
+//! which have no distance ties (ties would make the kNN order, and so the candidate
+//! set, depend on indices — see `pipeline::candidates`).
+
+#[path = "common/candidates.rs"]
+mod cands_common;
+
+use cands_common::*;
+use point2quad::math::{cross, dot, norm, normalize, sub};
+use point2quad::pipeline::candidates::{generate, CandidateConfig, Candidates};
+use point2quad::pipeline::features::{context_features, f_info, CONTEXT_DIM, F_INFO_DIM};
+use proptest::prelude::*;
+
+fn f64p(p: [f32; 3]) -> [f64; 3] {
+    [p[0] as f64, p[1] as f64, p[2] as f64]
+}
+
+/// F_info of one candidate recomputed in f64 from DESIGN §2's definitions.
+fn reference_f_info(points: &[[f32; 3]], c: &Candidates, q: [u32; 4]) -> Vec<f64> {
+    let p = q.map(|v| f64p(points[v as usize]));
+    let s = q.iter().map(|&v| c.spacing[v as usize] as f64).sum::<f64>() / 4.0;
+    let mut row = Vec::with_capacity(F_INFO_DIM);
+    for pi in &p {
+        for a in 0..3 {
+            row.push((pi[a] - p[0][a]) / s);
+        }
+    }
+    let e: Vec<[f64; 3]> = (0..4).map(|i| sub(p[(i + 1) % 4], p[i])).collect();
+    let n = normalize(cross(sub(p[2], p[0]), sub(p[3], p[1]))).unwrap();
+    let mut sj = f64::INFINITY;
+    let mut sines = Vec::new();
+    let mut normals = Vec::new();
+    for i in 0..4 {
+        let prev = e[(i + 3) % 4];
+        let ci = cross(prev, e[i]);
+        let ll = norm(prev) * norm(e[i]);
+        sj = sj.min(dot(ci, n) / ll);
+        sines.push(norm(ci) / ll);
+        normals.extend_from_slice(&normalize(ci).unwrap());
+    }
+    row.push(sj);
+    row.extend(sines);
+    row.extend(normals);
+    row
+}
+
+fn run(points: &[[f32; 3]]) -> Candidates {
+    generate(points, &CandidateConfig::default()).unwrap()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(32))]
+
+    #[test]
+    fn candidates_are_valid_convex_ccw_and_match_reference_features(cloud in wavy_strategy()) {
+        let pts = to_f32(&cloud);
+        let cfg = CandidateConfig::default();
+        let c = run(&pts);
+        prop_assert!(!c.is_empty());
+        let n = pts.len() as u32;
+        let mut keys: Vec<[u32; 4]> = c.quads.iter().map(key).collect();
+        keys.sort_unstable();
+        let before = keys.len();
+        keys.dedup();
+        prop_assert_eq!(before, keys.len(), "duplicate vertex sets");
+        for nrm in &c.normals {
+            prop_assert!((norm(f64p(*nrm)) - 1.0).abs() < 1e-5);
+        }
+        let f = f_info(&pts, &c);
+        let ctx = context_features(&pts, &c);
+        prop_assert_eq!(f.len(), c.len() * F_INFO_DIM);
+        prop_assert_eq!(ctx.len(), c.len() * CONTEXT_DIM);
+        for (ci, q) in c.quads.iter().enumerate() {
+            prop_assert!(q.iter().all(|&v| v < n));
+            prop_assert!(key(q).windows(2).all(|w| w[0] != w[1]), "repeated index in {:?}", q);
+            let row = &f[ci * F_INFO_DIM..(ci + 1) * F_INFO_DIM];
+            let reference = reference_f_info(&pts, &c, *q);
+            for (a, (&got, &want)) in row.iter().zip(&reference).enumerate() {
+                prop_assert!((got as f64 - want).abs() < 1e-4 * (1.0 + want.abs()),
+                    "F_info column {} of {:?}: {} vs reference {}", a, q, got, want);
+            }
+            // Convex: every corner turns the same way as the face normal; CCW about
+            // the local normals.
+            let p = q.map(|v| f64p(pts[v as usize]));
+            let fn_ = normalize(cross(sub(p[2], p[0]), sub(p[3], p[1]))).unwrap();
+            for i in 0..4 {
+                let cn = [row[17 + 3 * i] as f64, row[18 + 3 * i] as f64, row[19 + 3 * i] as f64];
+                prop_assert!(dot(cn, fn_) > 0.0, "corner {} of {:?} not convex", i, q);
+                prop_assert!((norm(cn) - 1.0).abs() < 1e-5);
+            }
+            let local: [f64; 3] = (0..4).fold([0.0; 3], |acc, i| {
+                let m = f64p(c.normals[q[i] as usize]);
+                [acc[0] + m[0], acc[1] + m[1], acc[2] + m[2]]
+            });
+            prop_assert!(dot(local, fn_) > 0.0, "{:?} is clockwise about the local normal", q);
+            // Ranges and the configured filters.
+            prop_assert!(row[12] <= 1.0 && row[12] >= -1.0);
+            prop_assert!(row[13..17].iter().all(|&s| (0.0..=1.0).contains(&s) && s >= cfg.min_sine - 1e-5));
+            let lens: Vec<f64> = (0..4).map(|i| norm(sub(p[(i + 1) % 4], p[i]))).collect();
+            let (lmin, lmax) = lens.iter().fold((f64::MAX, 0.0f64), |(a, b), &l| (a.min(l), b.max(l)));
+            prop_assert!(lmin >= cfg.min_edge_ratio as f64 * lmax * (1.0 - 1e-5));
+            let crow = &ctx[ci * CONTEXT_DIM..(ci + 1) * CONTEXT_DIM];
+            prop_assert!(crow[5] >= 1.0 && crow[5] <= 4.0);
+            prop_assert!((crow[4] as usize) < cfg.per_point);
+            for i in 0..4 {
+                let s = 0.5 * (c.spacing[q[i] as usize] + c.spacing[q[(i + 1) % 4] as usize]) as f64;
+                prop_assert!((crow[6 + i] as f64 - lens[i] / s).abs() < 1e-4 * (1.0 + lens[i] / s));
+            }
+        }
+    }
+
+    #[test]
+    fn candidates_and_f_info_invariant_under_similarity(
+        cloud in wavy_strategy(),
+        seed in any::<u64>(),
+        s in 0.01f64..100.0,
+        t in prop::array::uniform3(-50.0f64..50.0),
+    ) {
+        let r = point2quad::rng::Rng::new(seed).rotation();
+        let moved = similarity(&cloud, &r, s, t);
+        // Through the normalising frame, as the pipeline does.
+        let to_local = |c: &[[f64; 3]]| {
+            point2quad::pipeline::frame::Frame::fit(c).unwrap().to_local_all(c)
+        };
+        let (pa, pb) = (to_local(&cloud), to_local(&moved));
+        let (ca, cb) = (run(&pa), run(&pb));
+        prop_assert_eq!(&ca.quads, &cb.quads);
+        let (fa, fb) = (f_info(&pa, &ca), f_info(&pb, &cb));
+        for (ra, rb) in fa.chunks(F_INFO_DIM).zip(fb.chunks(F_INFO_DIM)) {
+            // Positions and normals rotate: rotate b's back.
+            for v in 0..8 {
+                let off = if v < 4 { 3 * v } else { 17 + 3 * (v - 4) };
+                let back = rotate_back(&r, [rb[off] as f64, rb[off + 1] as f64, rb[off + 2] as f64]);
+                for a in 0..3 {
+                    prop_assert!((ra[off + a] as f64 - back[a]).abs() < 2e-3, "{:?} vs {:?}", ra, rb);
+                }
+            }
+            for a in 12..17 {
+                prop_assert!((ra[a] - rb[a]).abs() < 1e-3);
+            }
+        }
+    }
+
+    #[test]
+    fn candidates_invariant_under_permutation(cloud in wavy_strategy(), seed in any::<u64>()) {
+        let pts = to_f32(&cloud);
+        let mut perm: Vec<usize> = (0..pts.len()).collect();
+        point2quad::rng::Rng::new(seed).shuffle(&mut perm);
+        // shuffled[j] = pts[perm[j]]
+        let shuffled: Vec<[f32; 3]> = perm.iter().map(|&i| pts[i]).collect();
+        let ca = run(&pts);
+        let cb = run(&shuffled);
+        let mut a: Vec<[u32; 4]> = ca.quads.clone();
+        let mut b: Vec<[u32; 4]> = cb.quads.iter().map(|q| cyclic_canonical(q.map(|j| perm[j as usize] as u32))).collect();
+        a.sort_unstable();
+        b.sort_unstable();
+        prop_assert_eq!(a, b);
+    }
+}
+
+#[test]
+fn coplanar_cloud_is_an_open_surface_with_candidates() {
+    let mut cloud = wavy_cloud(10, 10, 3);
+    for p in &mut cloud {
+        p[2] = 0.0;
+    }
+    let pts = to_f32(&cloud);
+    let c = run(&pts);
+    assert!(c.len() >= 81, "only {} candidates on a 10 x 10 plane", c.len());
+    for n in &c.normals {
+        assert!((n[2].abs() - 1.0).abs() < 1e-5, "plane normal {n:?}");
+    }
+}
+
+#[test]
+fn bad_clouds_are_errors_not_panics() {
+    let cfg = CandidateConfig::default();
+    assert!(generate(&[], &cfg).is_err());
+    assert!(generate(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], &cfg).is_err());
+    let mut pts = to_f32(&wavy_cloud(6, 6, 1));
+    pts[17][0] = f32::INFINITY;
+    let e = generate(&pts, &cfg).unwrap_err().to_string();
+    assert!(e.contains("point 17"), "{e}");
+    // Exactly four points (a square) and k larger than the cloud.
+    let sq = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.1, 0.0]];
+    let c = generate(&sq, &cfg).unwrap();
+    assert_eq!(c.quads.len(), 1);
+    assert_eq!(key(&c.quads[0]), [0, 1, 2, 3]);
+}

@@ -156,12 +156,12 @@ mod tests {
 
     #[test]
     fn negative_coordinates_get_their_own_voxels() {
-        let pts = [[-0.01, 0.0, 0.0], [0.01, 0.0, 0.0], [-0.99, -0.5, 0.2]];
+        let pts = [[-0.01, 0.0, 0.0], [0.01, 0.0, 0.0], [-0.99, 0.5, 0.2]];
         let s = grid_subsample(&pts, None, 1.0).unwrap();
         assert_eq!(s.points.len(), 2);
         assert_eq!(s.cluster[0], s.cluster[2]);
         assert_ne!(s.cluster[0], s.cluster[1]);
-        let want = [-0.5, -0.25, 0.1];
+        let want = [-0.5, 0.25, 0.1];
         assert!((0..3).all(|d| (s.points[0][d] - want[d]).abs() < 1e-6), "{:?}", s.points[0]);
     }
 

@@ -63,7 +63,11 @@ impl KpConvGeometry {
         if neighbors.len() != queries.len() * cap {
             return Err(Error::Shape {
                 op: "kpconv",
-                msg: format!("neighbour table has {} entries, expected {} × {cap}", neighbors.len(), queries.len()),
+                msg: format!(
+                    "neighbour table has {} entries, expected {} × {cap}",
+                    neighbors.len(),
+                    queries.len()
+                ),
             });
         }
         if !(sigma.is_finite() && sigma > 0.0) {
@@ -117,7 +121,13 @@ impl KpConvGeometry {
             }
             entries.extend(e);
         }
-        Ok(KpConvGeometry { n_queries: queries.len(), n_support: support.len(), n_kernel: kernel.len(), offsets, entries })
+        Ok(KpConvGeometry {
+            n_queries: queries.len(),
+            n_support: support.len(),
+            n_kernel: kernel.len(),
+            offsets,
+            entries,
+        })
     }
 
     /// The transposed table: for each support point, the `(query, kernel, h)` entries that read it,
@@ -166,6 +176,21 @@ fn gemm(
         c[..m * n].iter_mut().for_each(|x| *x *= beta);
         return;
     }
+    // nalgebra hands only matrices with every dimension > 5 to matrixmultiply; its fallback for
+    // smaller ones mishandles strided views, so those take this plain loop instead.
+    if m <= 5 || n <= 5 || k <= 5 {
+        for i in 0..m {
+            for j in 0..n {
+                let mut acc = 0.0f32;
+                for l in 0..k {
+                    acc += a[i * a_strides.0 + l * a_strides.1] * b[l * b_strides.0 + j * b_strides.1];
+                }
+                let cij = &mut c[i * n + j];
+                *cij = alpha * acc + if beta == 0.0 { 0.0 } else { beta * *cij };
+            }
+        }
+        return;
+    }
     let av = DMatrixView::from_slice_with_strides(a, m, k, a_strides.0, a_strides.1);
     let bv = DMatrixView::from_slice_with_strides(b, k, n, b_strides.0, b_strides.1);
     let mut cv = DMatrixViewMut::from_slice_with_strides_mut(c, m, n, n, 1);
@@ -194,7 +219,13 @@ fn gather_block(geom: &KpConvGeometry, features: &[f32], c_in: usize, q0: usize,
     }
 }
 
-fn check_shapes(geom: &KpConvGeometry, features: &[f32], c_in: usize, weights: &[f32], c_out: usize) -> Result<()> {
+fn check_shapes(
+    geom: &KpConvGeometry,
+    features: &[f32],
+    c_in: usize,
+    weights: &[f32],
+    c_out: usize,
+) -> Result<()> {
     if features.len() != geom.n_support * c_in {
         return Err(Error::Shape {
             op: "kpconv",
@@ -204,7 +235,11 @@ fn check_shapes(geom: &KpConvGeometry, features: &[f32], c_in: usize, weights: &
     if weights.len() != geom.n_kernel * c_in * c_out {
         return Err(Error::Shape {
             op: "kpconv",
-            msg: format!("weights have {} values, expected {} × {c_in} × {c_out}", weights.len(), geom.n_kernel),
+            msg: format!(
+                "weights have {} values, expected {} × {c_in} × {c_out}",
+                weights.len(),
+                geom.n_kernel
+            ),
         });
     }
     Ok(())
@@ -297,7 +332,8 @@ pub fn kpconv_backward(
                 let j = j0 + r;
                 for e in &t_entries[t_off[j]..t_off[j + 1]] {
                     let q = e.support as usize;
-                    let src = &grad_a[q * kc + e.kernel as usize * c_in..q * kc + (e.kernel as usize + 1) * c_in];
+                    let src =
+                        &grad_a[q * kc + e.kernel as usize * c_in..q * kc + (e.kernel as usize + 1) * c_in];
                     for (d, &g) in dst.iter_mut().zip(src) {
                         *d += e.h * g;
                     }
@@ -332,7 +368,8 @@ mod tests {
                     continue;
                 }
                 for (k, kpk) in kp.iter().enumerate() {
-                    let d: f32 = (0..3).map(|a| (s[j as usize][a] - qp[a] - kpk[a]).powi(2)).sum::<f32>().sqrt();
+                    let d: f32 =
+                        (0..3).map(|a| (s[j as usize][a] - qp[a] - kpk[a]).powi(2)).sum::<f32>().sqrt();
                     let h = (1.0 - d / sigma).max(0.0);
                     for c in 0..ci {
                         for o in 0..co {
@@ -351,7 +388,8 @@ mod tests {
         let s: Vec<[f32; 3]> = (0..40).map(|_| [rng.f32(), rng.f32(), rng.f32()]).collect();
         let q: Vec<[f32; 3]> = s.iter().step_by(3).copied().collect();
         let cap = 7;
-        let nb: Vec<u32> = (0..q.len() * cap).map(|i| if i % 5 == 4 { 40 } else { rng.below(40) as u32 }).collect();
+        let nb: Vec<u32> =
+            (0..q.len() * cap).map(|i| if i % 5 == 4 { 40 } else { rng.below(40) as u32 }).collect();
         let kp = crate::nn::kernel_points::scaled_kernel_points(15, 1, 0.5).unwrap();
         let (ci, co) = (3, 9);
         let f: Vec<f32> = (0..40 * ci).map(|_| rng.f32() - 0.5).collect();

@@ -145,7 +145,11 @@ mod tests {
 
     #[test]
     fn cap_keeps_nearest_and_pads_with_shadow() {
-        let t = RadiusTable { offsets: vec![0, 3, 3, 4], indices: vec![5, 2, 7, 1], dist_sq: vec![0.0, 0.1, 0.2, 0.0] };
+        let t = RadiusTable {
+            offsets: vec![0, 3, 3, 4],
+            indices: vec![5, 2, 7, 1],
+            dist_sq: vec![0.0, 0.1, 0.2, 0.0],
+        };
         let nb = cap_table(&t, 8, NeighborCap::Fixed(2)).unwrap();
         assert_eq!(nb.indices, vec![5, 2, 8, 8, 1, 8]);
         assert_eq!(nb.n_truncated, 1);
@@ -157,7 +161,8 @@ mod tests {
     fn radius_and_upsampling_on_a_line() {
         let pts: Vec<[f32; 3]> = (0..10).map(|i| [i as f32, 0.0, 0.0]).collect();
         let tree = KdTree::build(&pts);
-        let nb = radius_neighborhoods(&tree, &[[0.0; 3], [4.4, 0.0, 0.0]], 1.5, NeighborCap::Fixed(4)).unwrap();
+        let nb =
+            radius_neighborhoods(&tree, &[[0.0; 3], [4.4, 0.0, 0.0]], 1.5, NeighborCap::Fixed(4)).unwrap();
         assert_eq!(nb.indices, vec![0, 1, 10, 10, 4, 5, 3, 10]);
         let coarse = [[0.0, 0.0, 0.0], [5.0, 0.0, 0.0]];
         let up = nearest_upsampling(&KdTree::build(&coarse), &pts).unwrap();

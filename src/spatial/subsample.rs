@@ -45,7 +45,11 @@ pub fn voxel_key(p: [f32; 3], cell: f32) -> [i64; 3] {
 /// `InvalidInput` when `cell` is not finite and positive, a coordinate or feature is not finite
 /// (the message names the point), the feature buffer has the wrong length, or a coordinate is so
 /// large relative to `cell` that voxel keys would lose precision. An empty cloud gives an empty result.
-pub fn grid_subsample(points: &[[f32; 3]], features: Option<(&[f32], usize)>, cell: f32) -> Result<Subsampled> {
+pub fn grid_subsample(
+    points: &[[f32; 3]],
+    features: Option<(&[f32], usize)>,
+    cell: f32,
+) -> Result<Subsampled> {
     if !(cell.is_finite() && cell > 0.0) {
         return Err(Error::invalid(format!("grid cell must be finite and > 0, got {cell}")));
     }
@@ -64,7 +68,9 @@ pub fn grid_subsample(points: &[[f32; 3]], features: Option<(&[f32], usize)>, ce
     if points.len() > u32::MAX as usize {
         return Err(Error::invalid(format!("too many points for u32 indices: {}", points.len())));
     }
-    if let Some(i) = points.iter().position(|p| p.iter().any(|&c| (c as f64 / cell as f64).abs() > MAX_CELL_COORD)) {
+    if let Some(i) =
+        points.iter().position(|p| p.iter().any(|&c| (c as f64 / cell as f64).abs() > MAX_CELL_COORD))
+    {
         return Err(Error::invalid(format!(
             "point {i} ({:?}) is too far from the origin for grid cell {cell}",
             points[i]
@@ -79,14 +85,23 @@ pub fn grid_subsample(points: &[[f32; 3]], features: Option<(&[f32], usize)>, ce
         keys[a]
             .cmp(&keys[b])
             .then_with(|| {
-                (0..3).map(|d| points[a][d].total_cmp(&points[b][d])).find(|o| o.is_ne()).unwrap_or(std::cmp::Ordering::Equal)
+                (0..3)
+                    .map(|d| points[a][d].total_cmp(&points[b][d]))
+                    .find(|o| o.is_ne())
+                    .unwrap_or(std::cmp::Ordering::Equal)
             })
             .then_with(|| {
-                let (fa, fb) = (&feats[a * channels..(a + 1) * channels], &feats[b * channels..(b + 1) * channels]);
-                fa.iter().zip(fb).map(|(x, y)| x.total_cmp(y)).find(|o| o.is_ne()).unwrap_or(std::cmp::Ordering::Equal)
+                let (fa, fb) =
+                    (&feats[a * channels..(a + 1) * channels], &feats[b * channels..(b + 1) * channels]);
+                fa.iter()
+                    .zip(fb)
+                    .map(|(x, y)| x.total_cmp(y))
+                    .find(|o| o.is_ne())
+                    .unwrap_or(std::cmp::Ordering::Equal)
             })
     });
-    let mut out = Subsampled { points: Vec::new(), features: Vec::new(), channels, cluster: vec![0; points.len()] };
+    let mut out =
+        Subsampled { points: Vec::new(), features: Vec::new(), channels, cluster: vec![0; points.len()] };
     let mut fsum = vec![0.0f64; channels];
     let mut start = 0;
     while start < order.len() {
@@ -194,7 +209,9 @@ mod tests {
 
     #[test]
     fn pyramid_levels_shrink_and_cells_double() {
-        let pts: Vec<[f32; 3]> = (0..1000).map(|i| [(i % 10) as f32 * 0.1, ((i / 10) % 10) as f32 * 0.1, (i / 100) as f32 * 0.1]).collect();
+        let pts: Vec<[f32; 3]> = (0..1000)
+            .map(|i| [(i % 10) as f32 * 0.1, ((i / 10) % 10) as f32 * 0.1, (i / 100) as f32 * 0.1])
+            .collect();
         let p = subsample_pyramid(&pts, 0.1, 4).unwrap();
         assert_eq!(p.cells, vec![0.1, 0.2, 0.4, 0.8]);
         assert_eq!(p.levels[0].len(), 1000);

@@ -9,8 +9,11 @@
 //! Backward: `dW = Aᵀ · dOut` and `dA = dOut · Wᵀ`, then `df_j = Σ h_kj dA_q[k]` gathered through
 //! the transposed influence table (no scatter, so no races and a fixed summation order).
 
+use std::sync::Arc;
+
 use nalgebra::{DMatrixView, DMatrixViewMut};
 
+use crate::tensor::{CustomOp, Tensor};
 use crate::{par, Error, Result};
 
 /// One non-zero influence: neighbour `support` of an output point contributes `h` to kernel point `kernel`.
@@ -288,6 +291,26 @@ pub fn kpconv_backward(
     c_out: usize,
     grad_out: &[f32],
 ) -> Result<(Vec<f32>, Vec<f32>)> {
+    let (gf, gw) = kpconv_backward_select(geom, features, c_in, weights, c_out, grad_out, true, true)?;
+    Ok((gf.expect("internal error: requested"), gw.expect("internal error: requested")))
+}
+
+/// [`kpconv_backward`] computing only the requested gradients (`None` for the others): the
+/// first layer's input features need none, and skipping them saves the transposed gather.
+///
+/// # Errors
+/// `Shape` when a buffer length does not match the geometry and channel counts.
+#[allow(clippy::too_many_arguments)]
+pub fn kpconv_backward_select(
+    geom: &KpConvGeometry,
+    features: &[f32],
+    c_in: usize,
+    weights: &[f32],
+    c_out: usize,
+    grad_out: &[f32],
+    need_features: bool,
+    need_weights: bool,
+) -> Result<(Option<Vec<f32>>, Option<Vec<f32>>)> {
     check_shapes(geom, features, c_in, weights, c_out)?;
     if grad_out.len() != geom.n_queries * c_out {
         return Err(Error::Shape {
@@ -298,29 +321,20 @@ pub fn kpconv_backward(
     let kc = geom.n_kernel * c_in;
     let nq = geom.n_queries;
     let rows = rows_per_task(kc);
-    // A (nq × kc), recomputed rather than kept from the forward pass: the gather costs ~1/C_out of the GEMM.
-    let mut a = vec![0.0f32; nq * kc];
-    par::for_each_chunk_mut(&mut a, rows * kc, |ci, chunk| {
-        gather_block(geom, features, c_in, ci * rows, chunk.len() / kc.max(1), chunk);
-    });
-    // dW = Aᵀ · dOut, split over fixed row ranges of dW (kc rows): each element is computed
-    // by exactly one task with the same reduction, whatever the thread count.
-    let mut grad_w = vec![0.0f32; kc * c_out];
-    let wrows = 64usize;
-    if c_out > 0 {
-        par::for_each_chunk_mut(&mut grad_w, wrows * c_out, |ci, chunk| {
-            let r0 = ci * wrows;
-            let len = chunk.len() / c_out;
-            gemm(len, nq, c_out, 1.0, &a[r0..], (1, kc), grad_out, (c_out, 1), 0.0, chunk);
-        });
+    let mut grad_w = None;
+    if need_weights {
+        grad_w = Some(weight_grad(geom, features, c_in, c_out, grad_out));
     }
-    // dA = dOut · Wᵀ (nq × kc), reusing A's buffer.
-    par::for_each_chunk_mut(&mut a, rows * kc, |ci, chunk| {
+    if !need_features {
+        return Ok((None, grad_w));
+    }
+    // dA = dOut · Wᵀ (nq × kc).
+    let mut grad_a = vec![0.0f32; nq * kc];
+    par::for_each_chunk_mut(&mut grad_a, rows * kc, |ci, chunk| {
         let q0 = ci * rows;
         let n = chunk.len() / kc.max(1);
         gemm(n, c_out, kc, 1.0, &grad_out[q0 * c_out..], (c_out, 1), weights, (1, c_out), 0.0, chunk);
     });
-    let grad_a = a;
     // df_j = Σ_{(q,k) reading j} h · dA_q[k], gathered per support point.
     let (t_off, t_entries) = geom.transpose();
     let mut grad_f = vec![0.0f32; geom.n_support * c_in];
@@ -341,7 +355,115 @@ pub fn kpconv_backward(
             }
         });
     }
-    Ok((grad_f, grad_w))
+    Ok((Some(grad_f), grad_w))
+}
+
+/// `dW = Aᵀ · dOut` with A re-gathered (K·C_in × C_out).
+fn weight_grad(
+    geom: &KpConvGeometry,
+    features: &[f32],
+    c_in: usize,
+    c_out: usize,
+    grad_out: &[f32],
+) -> Vec<f32> {
+    let kc = geom.n_kernel * c_in;
+    let nq = geom.n_queries;
+    let rows = rows_per_task(kc);
+    // A (nq × kc), recomputed rather than kept from the forward pass: the gather costs ~1/C_out of the GEMM.
+    let mut a = vec![0.0f32; nq * kc];
+    par::for_each_chunk_mut(&mut a, rows * kc, |ci, chunk| {
+        gather_block(geom, features, c_in, ci * rows, chunk.len() / kc.max(1), chunk);
+    });
+    // dW = Aᵀ · dOut, split over fixed row ranges of dW (kc rows): each element is computed
+    // by exactly one task with the same reduction, whatever the thread count.
+    let mut grad_w = vec![0.0f32; kc * c_out];
+    let wrows = 64usize;
+    if c_out > 0 {
+        par::for_each_chunk_mut(&mut grad_w, wrows * c_out, |ci, chunk| {
+            let r0 = ci * wrows;
+            let len = chunk.len() / c_out;
+            gemm(len, nq, c_out, 1.0, &a[r0..], (1, kc), grad_out, (c_out, 1), 0.0, chunk);
+        });
+    }
+    grad_w
+}
+
+/// Rigid KPConv as a [`CustomOp`] on the tape. Inputs: features `[n_support × C_in]` and
+/// weights `[K × C_in × C_out]`; output `[n_queries × C_out]`. The geometry (influences) is
+/// shared, so many layers and epochs can reuse one table.
+pub struct KpConvOp {
+    geom: Arc<KpConvGeometry>,
+}
+
+impl KpConvOp {
+    /// The op over a precomputed geometry.
+    pub fn new(geom: Arc<KpConvGeometry>) -> Self {
+        KpConvOp { geom }
+    }
+
+    fn dims(&self, inputs: &[&Tensor]) -> Result<(usize, usize)> {
+        let [f, w] = inputs else {
+            return Err(Error::Shape {
+                op: "kpconv",
+                msg: format!("expected 2 inputs, got {}", inputs.len()),
+            });
+        };
+        let wd = w.dims();
+        if wd.len() != 3 || wd[0] != self.geom.n_kernel {
+            return Err(Error::Shape {
+                op: "kpconv",
+                msg: format!("weights must be [{} × C_in × C_out], got {}", self.geom.n_kernel, w.shape()),
+            });
+        }
+        if f.rows() != self.geom.n_support || f.cols() != wd[1] {
+            return Err(Error::Shape {
+                op: "kpconv",
+                msg: format!(
+                    "features {} for {} support points and weights {}",
+                    f.shape(),
+                    self.geom.n_support,
+                    w.shape()
+                ),
+            });
+        }
+        Ok((wd[1], wd[2]))
+    }
+}
+
+impl CustomOp for KpConvOp {
+    fn name(&self) -> &'static str {
+        "kpconv"
+    }
+
+    fn forward(&mut self, inputs: &[&Tensor]) -> Result<Tensor> {
+        let (c_in, c_out) = self.dims(inputs)?;
+        let out = kpconv_forward(&self.geom, inputs[0].data(), c_in, inputs[1].data(), c_out)?;
+        Tensor::new(&[self.geom.n_queries, c_out], out)
+    }
+
+    fn backward(
+        &self,
+        inputs: &[&Tensor],
+        _output: &Tensor,
+        grad_output: &Tensor,
+        needs_grad: &[bool],
+    ) -> Result<Vec<Option<Tensor>>> {
+        let (c_in, c_out) = self.dims(inputs)?;
+        let need = |i: usize| needs_grad.get(i).copied().unwrap_or(false);
+        let (gf, gw) = kpconv_backward_select(
+            &self.geom,
+            inputs[0].data(),
+            c_in,
+            inputs[1].data(),
+            c_out,
+            grad_output.data(),
+            need(0),
+            need(1),
+        )?;
+        let gf = gf.map(|g| Tensor::from_shape(inputs[0].shape(), g)).transpose()?;
+        let gw = gw.map(|g| Tensor::from_shape(inputs[1].shape(), g)).transpose()?;
+        Ok(vec![gf, gw])
+    }
 }
 
 #[cfg(test)]

@@ -90,3 +90,30 @@ pub fn brute_radius(support: &[[f32; 3]], q: [f32; 3], radius_sq: f32) -> Vec<u3
     v.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     v.into_iter().map(|(_, i)| i).collect()
 }
+
+/// `n` points on a sphere of radius `r` centred at `c` (Fibonacci lattice, jittered by `seed`).
+pub fn sphere_cloud(n: usize, r: f32, c: [f32; 3], seed: u64) -> Vec<[f32; 3]> {
+    let mut rng = point2quad::rng::Rng::new(seed);
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    (0..n)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let rho = (1.0 - z * z).sqrt();
+            let t = golden * i as f64 + 0.3 * rng.f64();
+            let p = [rho * t.cos(), rho * t.sin(), z];
+            [c[0] + r * p[0] as f32, c[1] + r * p[1] as f32, c[2] + r * p[2] as f32]
+        })
+        .collect()
+}
+
+/// A tiny KPFCNN for tests: 3 levels, widths 8/16/32, cells 0.1/0.2/0.4, d_P = 6.
+pub fn tiny_config() -> point2quad::nn::kpfcnn::KpfcnnConfig {
+    use point2quad::nn::kpfcnn::BlockKind::*;
+    point2quad::nn::kpfcnn::KpfcnnConfig {
+        blocks: vec![Simple, Resnetb, ResnetbStrided, Resnetb, ResnetbStrided, Resnetb],
+        first_features_dim: 8,
+        first_cell: 0.1,
+        out_dim: 6,
+        ..point2quad::nn::kpfcnn::KpfcnnConfig::default_preset()
+    }
+}

@@ -2,6 +2,9 @@
 //! subsampling (barycentres per voxel, input-order independence), capped radius neighbourhoods
 //! with shadow padding, nearest upsampling, and kernel point placement.
 
+// Axis loops (`for d in 0..3`) index several arrays at once; iterators would obscure that.
+#![allow(clippy::needless_range_loop)]
+
 #[path = "common/kpconv.rs"]
 mod kpc;
 

@@ -200,9 +200,11 @@ fn gemm(
     cv.gemm(alpha, &av, &bv, beta);
 }
 
-/// Output rows per parallel task: keeps a task's gathered block A (rows × K·C_in) near 1 MiB.
+/// Output rows per parallel task: a task's gathered block A (rows × K·C_in) stays near 4 MiB,
+/// and at least 128 rows share one packing of the weights (GEMM packs W once per call, which
+/// costs as much as the multiply itself for a few dozen rows). Independent of the thread count.
 fn rows_per_task(kc: usize) -> usize {
-    ((1usize << 18) / kc.max(1)).clamp(8, 512)
+    ((1usize << 20) / kc.max(1)).clamp(128, 2048)
 }
 
 /// Gathers `A_q = Σ h_kj f_j` for queries `q0..q0 + rows` into `a` (rows × K·C_in, zeroed here).
@@ -295,6 +297,9 @@ pub fn kpconv_backward(
     Ok((gf.expect("internal error: requested"), gw.expect("internal error: requested")))
 }
 
+/// `(grad_features, grad_weights)`, each present when requested.
+pub type GradPair = (Option<Vec<f32>>, Option<Vec<f32>>);
+
 /// [`kpconv_backward`] computing only the requested gradients (`None` for the others): the
 /// first layer's input features need none, and skipping them saves the transposed gather.
 ///
@@ -310,7 +315,7 @@ pub fn kpconv_backward_select(
     grad_out: &[f32],
     need_features: bool,
     need_weights: bool,
-) -> Result<(Option<Vec<f32>>, Option<Vec<f32>>)> {
+) -> Result<GradPair> {
     check_shapes(geom, features, c_in, weights, c_out)?;
     if grad_out.len() != geom.n_queries * c_out {
         return Err(Error::Shape {
@@ -471,6 +476,7 @@ mod tests {
     use super::*;
 
     /// Direct evaluation of the KPConv formula, no tables, no GEMM.
+    #[allow(clippy::too_many_arguments)]
     fn naive(
         q: &[[f32; 3]],
         s: &[[f32; 3]],

@@ -193,11 +193,39 @@ impl KpfcnnConfig {
         Ok(())
     }
 
+    /// The KPConv layers in execution order (for profiling and reports).
+    pub fn kpconv_layers(&self) -> Vec<KpConvLayerShape> {
+        plan(self)
+            .blocks
+            .iter()
+            .map(|b| {
+                let (c_in, c_out) = match b.kind {
+                    BlockKind::Simple => (b.c_in, b.c_out / 2),
+                    _ => (b.c_out / 4, b.c_out / 4),
+                };
+                KpConvLayerShape { level: b.level, strided: b.kind == BlockKind::ResnetbStrided, c_in, c_out }
+            })
+            .collect()
+    }
+
     /// Learnable parameters of the network (KPConv and unary weights, batch-norm γ and β;
     /// running statistics are buffers and not counted), from the configuration alone.
     pub fn param_count(&self) -> usize {
         plan(self).param_count(self.num_kernel_points)
     }
+}
+
+/// Where a KPConv layer runs and its widths.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct KpConvLayerShape {
+    /// Level of its support points (strided layers write into level + 1).
+    pub level: usize,
+    /// True for a strided (pooling) KPConv.
+    pub strided: bool,
+    /// Input channels.
+    pub c_in: usize,
+    /// Output channels.
+    pub c_out: usize,
 }
 
 /// Shapes of one unary layer (weight `[out × in]`, BN over `out`).

@@ -229,3 +229,37 @@ fn paper_preset_runs_and_counts_parameters() {
     let out = run(&cfg, &mut ps, &net, &pyr, false);
     assert_eq!(out.dims(), &[600, 64]);
 }
+
+#[test]
+fn degenerate_clouds_give_results_or_clear_errors() {
+    let cfg = kpc::tiny_config();
+    let mut ps = ParamStore::new();
+    let net = Kpfcnn::new(&cfg, &mut ps).unwrap();
+    // One point: every level has one point; eval works, train-mode batch norm refuses clearly.
+    let one = prepare(&[[0.1, 0.2, 0.3]], &cfg).unwrap();
+    assert!(one.points.iter().all(|l| l.len() == 1));
+    let out = run(&cfg, &mut ps, &net, &one, false);
+    assert_eq!(out.dims(), &[1, cfg.out_dim]);
+    let mut g = Graph::train(&mut ps);
+    let err = net.forward(&mut g, &one).unwrap_err();
+    assert!(matches!(err, point2quad::Error::Shape { .. }), "{err}");
+    drop(g);
+    // Duplicates and a collinear cloud.
+    let line: Vec<[f32; 3]> = (0..60).map(|i| [i as f32 * 0.02 - 0.6, 0.0, 0.0]).chain(std::iter::repeat([0.0; 3]).take(10)).collect();
+    let pyr = prepare(&line, &cfg).unwrap();
+    let out = run(&cfg, &mut ps, &net, &pyr, true);
+    assert_eq!(out.dims(), &[70, cfg.out_dim]);
+    // Rows of identical points get identical features.
+    for r in 61..70 {
+        assert_eq!(out.row(r), out.row(60));
+    }
+    // Bad input is an error, never a panic.
+    assert!(prepare(&[], &cfg).is_err());
+    assert!(prepare(&[[f32::NAN, 0.0, 0.0]], &cfg).is_err());
+    assert!(prepare(&[[f32::INFINITY, 0.0, 0.0], [0.0; 3]], &cfg).is_err());
+    assert!(prepare(&[[1e30, 0.0, 0.0]], &cfg).is_err());
+    // A pyramid from another configuration is refused.
+    let other = prepare(&line, &KpfcnnConfig::paper()).unwrap();
+    let mut g = Graph::eval(&mut ps);
+    assert!(net.forward(&mut g, &other).is_err());
+}

@@ -9,6 +9,16 @@
 //! (skipped when already C/4) → KPConv → BN + LeakyReLU → unary up to C (no activation) + shortcut
 //! (unary without activation when widths differ; max-pool over the pooling neighbourhood when
 //! strided), then LeakyReLU.
+//!
+//! | preset | blocks | widths | levels (cells) | parameters |
+//! |---|---|---|---|---|
+//! | `default_preset()` | simple, resnetb, (strided, resnetb) ×2 | 32 → 128, d_P 64 | 3 (0.03 raw, 0.06, 0.12) | 65,744 |
+//! | `paper()` | S3DIS list, rigid | 128 → 2048, d_P 64 | 5 (0.03 raw, 0.06 … 0.48) | 24,364,224 |
+//!
+//! `paper`: encoder 20,174,144 + decoder unaries 4,181,760 + head 8,320 = 24,364,224, the
+//! authors' KPFCNN for this block list with rigid KPConv (no bias; K × C_in × C_out weights),
+//! bias-free unaries + batch norm (γ, β), and the head unary 128 → 64 with batch norm in place of
+//! their 128 → 128 head and classifier. Batch-norm running statistics are buffers, not counted.
 
 use std::sync::Arc;
 

@@ -1,1 +1,218 @@
-//! (to be written)
+//! Atomic file writes: the content goes to a uniquely named temporary file in the
+//! target's directory, is flushed to disk, and only then renamed over the target.
+//! A reader never sees a half-written file, and a failed write leaves nothing behind.
+
+use crate::error::{Error, Result};
+use std::fs::{self, File, OpenOptions};
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Distinguishes temporary files made by threads of the same process.
+static COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// Writes a file atomically: `f` writes the content into a buffered writer on a
+/// temporary file in the same directory as `path` (so the rename cannot cross file
+/// systems); the file is flushed and synced, then renamed over `path`.
+///
+/// # Errors
+/// `Io` naming `path` when the temporary file cannot be created, written, synced or
+/// renamed (an I/O error raised while `f` writes is reported this way too, in place
+/// of whatever `f` made of it); any other error `f` returns is passed on. On every
+/// error the temporary file is removed and `path` is left as it was.
+pub fn write_atomic(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
+    let (tmp, file) = create_temp(path)?;
+    let result =
+        write_and_sync(path, file, f).and_then(|()| fs::rename(&tmp, path).map_err(|e| Error::io(path, e)));
+    if result.is_err() {
+        // Best effort: the original error matters more than a failed clean-up.
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Creates a new temporary file next to `path`. `create_new` makes the name
+/// exclusive even against other processes; on a clash the next name is tried.
+fn create_temp(path: &Path) -> Result<(PathBuf, File)> {
+    let file_name = path
+        .file_name()
+        .ok_or_else(|| Error::io(path, io::Error::new(io::ErrorKind::InvalidInput, "not a file path")))?;
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let pid = process_id();
+    let mut last_err = None;
+    for _ in 0..100 {
+        let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+        let mut name = std::ffi::OsString::from(".");
+        name.push(file_name);
+        name.push(format!(".{pid}.{n}.tmp"));
+        let tmp = dir.join(name);
+        match OpenOptions::new().write(true).create_new(true).open(&tmp) {
+            Ok(file) => return Ok((tmp, file)),
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => last_err = Some(e),
+            Err(e) => return Err(Error::io(path, e)),
+        }
+    }
+    let e = last_err.unwrap_or_else(|| io::Error::other("could not create a temporary file"));
+    Err(Error::io(path, e))
+}
+
+/// The process id where the platform has one (wasm32-unknown-unknown panics on
+/// `std::process::id`); only used to make temporary names readable and rarely clash.
+fn process_id() -> u32 {
+    #[cfg(not(all(target_family = "wasm", target_os = "unknown")))]
+    {
+        std::process::id()
+    }
+    #[cfg(all(target_family = "wasm", target_os = "unknown"))]
+    {
+        0
+    }
+}
+
+fn write_and_sync(path: &Path, file: File, f: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
+    let w = run_tracked(path, BufWriter::new(file), f)?;
+    let file = w.into_inner().map_err(|e| Error::io(path, e.into_error()))?;
+    file.sync_all().map_err(|e| Error::io(path, e))
+}
+
+/// Runs the content writer on `w`; an I/O error it met is reported naming `path`.
+fn run_tracked<W: Write>(path: &Path, w: W, f: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<W> {
+    let mut t = Tracking { inner: w, first_err: None };
+    let r = f(&mut t);
+    if let Some(e) = t.first_err.take() {
+        return Err(Error::io(path, e));
+    }
+    r?;
+    t.flush().map_err(|e| Error::io(path, e))?;
+    Ok(t.inner)
+}
+
+/// A writer that remembers the first I/O error, so that it can be reported with
+/// the path even when the content writer had no path to name.
+struct Tracking<W: Write> {
+    inner: W,
+    first_err: Option<io::Error>,
+}
+
+impl<W: Write> Tracking<W> {
+    fn note<T>(&mut self, r: io::Result<T>) -> io::Result<T> {
+        if let Err(e) = &r {
+            if self.first_err.is_none() {
+                self.first_err = Some(io::Error::new(e.kind(), e.to_string()));
+            }
+        }
+        r
+    }
+}
+
+impl<W: Write> Write for Tracking<W> {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        let r = self.inner.write(buf);
+        self.note(r)
+    }
+    fn write_all(&mut self, buf: &[u8]) -> io::Result<()> {
+        let r = self.inner.write_all(buf);
+        self.note(r)
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        let r = self.inner.flush();
+        self.note(r)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch_dir(tag: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!(
+            "p2q_atomic_{tag}_{}_{}",
+            std::process::id(),
+            COUNTER.fetch_add(1, Ordering::Relaxed)
+        ));
+        let _ = fs::remove_dir_all(&d);
+        fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn entries(dir: &Path) -> Vec<String> {
+        let mut v: Vec<String> = fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn writes_and_replaces() {
+        let d = scratch_dir("ok");
+        let p = d.join("a.txt");
+        write_atomic(&p, |w| w.write_all(b"one").map_err(|e| Error::io("x", e))).unwrap();
+        assert_eq!(fs::read(&p).unwrap(), b"one");
+        write_atomic(&p, |w| w.write_all(b"two!").map_err(|e| Error::io("x", e))).unwrap();
+        assert_eq!(fs::read(&p).unwrap(), b"two!");
+        assert_eq!(entries(&d), vec!["a.txt"]);
+        fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn failing_writer_leaves_no_file_and_no_temp() {
+        let d = scratch_dir("fail_new");
+        let p = d.join("new.obj");
+        let err = write_atomic(&p, |w| {
+            w.write_all(&[b'x'; 100_000]).map_err(|e| Error::io("x", e))?;
+            Err(Error::invalid("stopped midway"))
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("stopped midway"), "{err}");
+        assert!(entries(&d).is_empty(), "{:?}", entries(&d));
+        fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn failing_writer_leaves_existing_file_untouched() {
+        let d = scratch_dir("fail_old");
+        let p = d.join("old.obj");
+        fs::write(&p, b"precious").unwrap();
+        let r = write_atomic(&p, |w| {
+            w.write_all(b"garbage").map_err(|e| Error::io("x", e))?;
+            Err(Error::invalid("no"))
+        });
+        assert!(r.is_err());
+        assert_eq!(fs::read(&p).unwrap(), b"precious");
+        assert_eq!(entries(&d), vec!["old.obj"]);
+        fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// An I/O error inside the content writer is reported with the target path,
+    /// even when the content writer itself had no path to name.
+    #[test]
+    fn io_error_names_the_path() {
+        let p = Path::new("some/dir/x.off");
+        let err = run_tracked(p, FailWriter, |w| w.write_all(b"abc").map_err(|e| Error::io("<output>", e)))
+            .err()
+            .expect("must fail");
+        let msg = err.to_string();
+        assert!(msg.contains("some/dir/x.off") && msg.contains("disk full"), "{msg}");
+
+        let d = scratch_dir("ioerr");
+        let missing = d.join("no_such_dir").join("f.obj");
+        let err = write_atomic(&missing, |_| Ok(())).unwrap_err().to_string();
+        assert!(err.contains("no_such_dir"), "{err}");
+        fs::remove_dir_all(&d).unwrap();
+    }
+
+    struct FailWriter;
+    impl Write for FailWriter {
+        fn write(&mut self, _: &[u8]) -> io::Result<usize> {
+            Err(io::Error::other("disk full"))
+        }
+        fn flush(&mut self) -> io::Result<()> {
+            Ok(())
+        }
+    }
+}

@@ -7,3 +7,4 @@ pub mod off;
 pub mod ply;
 pub mod points;
 pub mod svg;
+pub(crate) mod text;

@@ -1,1 +1,250 @@
-//! (to be written)
+//! Point clouds: read from .xyz/.txt/.pts (text columns), .ply, .obj and .off
+//! (their vertices), write as .xyz with round-trip-exact coordinates.
+
+use super::atomic::write_atomic;
+use super::text::{self, coord, out_err, parse_i64, show, Lines, Tokens};
+use super::{obj, off, ply};
+use crate::error::{Error, Result};
+use std::io::Write;
+use std::path::Path;
+
+/// A point file format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum PointFormat {
+    /// Text columns `x y z [more…]` (`.xyz`, `.txt`, `.pts`).
+    Xyz,
+    /// Stanford PLY, the `vertex` element.
+    Ply,
+    /// Wavefront OBJ, the `v` lines.
+    Obj,
+    /// OFF, the vertices.
+    Off,
+}
+
+impl PointFormat {
+    /// The format named by `path`'s extension (case-insensitive): `.xyz`, `.txt`,
+    /// `.pts` → `Xyz`; `.ply`, `.obj`, `.off`.
+    ///
+    /// # Errors
+    /// `Usage` naming the path and listing the supported extensions.
+    pub fn from_path(path: &Path) -> Result<PointFormat> {
+        let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+        match ext.as_deref() {
+            Some("xyz" | "txt" | "pts") => Ok(PointFormat::Xyz),
+            Some("ply") => Ok(PointFormat::Ply),
+            Some("obj") => Ok(PointFormat::Obj),
+            Some("off") => Ok(PointFormat::Off),
+            _ => Err(Error::Usage(format!(
+                "{}: unknown point format; supported extensions: .xyz .txt .pts .ply .obj .off",
+                path.display()
+            ))),
+        }
+    }
+}
+
+/// Reads a point cloud, choosing the format by extension.
+///
+/// # Errors
+/// `Usage` for an unknown extension, `Io` when the file cannot be read, and the
+/// errors of [`parse_points`].
+pub fn read_points(path: &Path) -> Result<Vec<[f64; 3]>> {
+    let format = PointFormat::from_path(path)?;
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_points(&bytes, format, &path.display().to_string())
+}
+
+/// Parses a point cloud held in memory; `name` stands for the file in error messages.
+///
+/// `.xyz`: one point per line, columns separated by whitespace and/or commas; `#`
+/// starts a comment; blank lines are skipped; columns after the third (normals,
+/// colours…) are ignored. A first data line holding a single integer is a point
+/// count (the `.pts` convention) and must match the number of points. For mesh
+/// formats only the vertices are taken (faces are not read, except that PLY
+/// still checks every element's length).
+///
+/// # Errors
+/// `Parse` naming `name` and the line (or, in binary PLY, the vertex) for a line
+/// with fewer than 3 columns, a bad or non-finite number, any error of the mesh
+/// format's parser, and when the file holds no points.
+pub fn parse_points(bytes: &[u8], format: PointFormat, name: &str) -> Result<Vec<[f64; 3]>> {
+    let points = match format {
+        PointFormat::Xyz => parse_xyz(bytes, name)?,
+        PointFormat::Ply => ply::parse_ply_with(bytes, name, false)?.vertices,
+        PointFormat::Obj => obj::parse_obj_with(bytes, name, false)?.vertices,
+        PointFormat::Off => off::parse_off_with(bytes, name, false)?.vertices,
+    };
+    if points.is_empty() {
+        return Err(Error::parse(name, 0, "contains no points"));
+    }
+    Ok(points)
+}
+
+fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
+    let mut points = Vec::with_capacity(bytes.len() / 24);
+    let mut declared: Option<(usize, usize)> = None;
+    let mut first = true;
+    for (ln, raw) in Lines::new(bytes) {
+        let mut toks = Tokens::with_commas(raw);
+        let Some(t0) = toks.next() else { continue };
+        if first {
+            first = false;
+            if toks.clone().next().is_none() {
+                // A lone first value: the `.pts` point count.
+                match parse_i64(t0).and_then(|n| usize::try_from(n).ok()) {
+                    Some(n) => {
+                        declared = Some((n, ln));
+                        continue;
+                    }
+                    _ => {
+                        return Err(Error::parse(
+                            name,
+                            ln,
+                            format!("expected 'x y z' or a point count, found '{}'", show(t0)),
+                        ))
+                    }
+                }
+            }
+        }
+        let i = points.len();
+        let mut p = [0.0; 3];
+        p[0] = coord(t0, name, ln, &format_args!("point {i}"))?;
+        for (axis, c) in p.iter_mut().enumerate().skip(1) {
+            let tok = toks.next().ok_or_else(|| {
+                Error::parse(name, ln, format!("point {i}: needs 3 coordinates, found {axis}"))
+            })?;
+            *c = coord(tok, name, ln, &format_args!("point {i}"))?;
+        }
+        points.push(p);
+    }
+    if let Some((n, ln)) = declared {
+        if n != points.len() {
+            return Err(Error::parse(
+                name,
+                ln,
+                format!("the header declares {n} points but the file holds {}", points.len()),
+            ));
+        }
+    }
+    Ok(points)
+}
+
+/// Writes points as `.xyz` text (`x y z` per line), atomically; every coordinate
+/// reads back bit-exactly (sign of zero, subnormals and extremes included).
+///
+/// # Errors
+/// `InvalidInput` naming the first non-finite point (nothing is written); `Io`
+/// naming the path.
+pub fn write_points_xyz(path: &Path, points: &[[f64; 3]]) -> Result<()> {
+    if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        return Err(Error::invalid(format!("point {i} has a non-finite coordinate {:?}", points[i])));
+    }
+    write_atomic(path, |w| write_xyz(w, points))
+}
+
+/// Writes points as `.xyz` text to any writer (see [`write_points_xyz`]).
+///
+/// # Errors
+/// `Io` from the writer.
+pub fn write_xyz(w: &mut dyn Write, points: &[[f64; 3]]) -> Result<()> {
+    let run = |w: &mut dyn Write| -> std::io::Result<()> {
+        for p in points {
+            text::write_f64(w, p[0])?;
+            w.write_all(b" ")?;
+            text::write_f64(w, p[1])?;
+            w.write_all(b" ")?;
+            text::write_f64(w, p[2])?;
+            w.write_all(b"\n")?;
+        }
+        Ok(())
+    };
+    run(w).map_err(out_err)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn formats_by_extension() {
+        for (p, f) in [
+            ("a.XYZ", PointFormat::Xyz),
+            ("a.txt", PointFormat::Xyz),
+            ("a.Pts", PointFormat::Xyz),
+            ("a.ply", PointFormat::Ply),
+            ("a.obj", PointFormat::Obj),
+            ("a.OFF", PointFormat::Off),
+        ] {
+            assert_eq!(PointFormat::from_path(Path::new(p)).unwrap(), f, "{p}");
+        }
+        let e = PointFormat::from_path(Path::new("x.las")).unwrap_err().to_string();
+        assert!(e.contains("x.las") && e.contains(".xyz .txt .pts .ply .obj .off"), "{e}");
+    }
+
+    #[test]
+    fn xyz_columns_comments_commas() {
+        let src = b"# header\n\n1 2 3\n4,5,6 # trailing\n 7\t8  9 0.1 0.2 0.3 255\r\n-0 1e-3 .5\n";
+        let p = parse_points(src, PointFormat::Xyz, "t.xyz").unwrap();
+        assert_eq!(p, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0], [-0.0, 1e-3, 0.5]]);
+        assert!(p[3][0].is_sign_negative());
+    }
+
+    #[test]
+    fn pts_count_header_is_checked() {
+        let p = parse_points(b"2\n1 2 3\n4 5 6\n", PointFormat::Xyz, "t.pts").unwrap();
+        assert_eq!(p.len(), 2);
+        let e = parse_points(b"3\n1 2 3\n4 5 6\n", PointFormat::Xyz, "t.pts").unwrap_err().to_string();
+        assert!(e.contains("t.pts:1: the header declares 3 points but the file holds 2"), "{e}");
+    }
+
+    #[test]
+    fn xyz_errors_name_file_and_line() {
+        let cases: &[(&[u8], &str)] = &[
+            (b"1 2 3\n4 5\n", "t.xyz:2: point 1: needs 3 coordinates, found 2"),
+            (b"1 2 3\n4\n", "t.xyz:2: point 1: needs 3 coordinates, found 1"),
+            (b"x y z\n1 2 3\n", "t.xyz:1: point 0: bad number 'x'"),
+            (b"1 2 3\n\n1 nan 3\n", "t.xyz:3: point 1: non-finite"),
+            (b"1 2 3\n1 2 -inf\n", "t.xyz:2: point 1: non-finite"),
+            (b"# only a comment\n\n", "t.xyz: contains no points"),
+            (b"", "t.xyz: contains no points"),
+            (b"1.5\n", "t.xyz:1: expected 'x y z' or a point count"),
+        ];
+        for (src, want) in cases {
+            let e = parse_points(src, PointFormat::Xyz, "t.xyz").unwrap_err().to_string();
+            assert!(e.contains(want), "got '{e}', want '{want}'");
+        }
+    }
+
+    #[test]
+    fn mesh_formats_give_their_vertices() {
+        let obj = b"v 1 2 3 1\nvn 0 0 1\nv 4 5 6\nf 1 2 1\n";
+        assert_eq!(
+            parse_points(obj, PointFormat::Obj, "a.obj").unwrap(),
+            vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]
+        );
+        let off = b"NOFF\n2 0 0\n1 2 3 0 0 1\n4 5 6 0 0 1\n";
+        assert_eq!(
+            parse_points(off, PointFormat::Off, "a.off").unwrap(),
+            vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]
+        );
+        let ply = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty double z\nproperty double y\nproperty double x\nend_header\n1 2 3\n";
+        assert_eq!(parse_points(ply, PointFormat::Ply, "a.ply").unwrap(), vec![[3.0, 2.0, 1.0]]);
+        let e = parse_points(b"OFF\n0 0 0\n", PointFormat::Off, "a.off").unwrap_err().to_string();
+        assert!(e.contains("a.off: contains no points"), "{e}");
+    }
+
+    #[test]
+    fn write_read_bit_exact_and_refuses_nan() {
+        let pts = vec![[-0.0, 5e-324, 1e300], [f64::MAX, f64::MIN_POSITIVE, -1e-310], [0.1, 0.2, 0.3]];
+        let dir = std::env::temp_dir().join(format!("p2q_points_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("p.xyz");
+        write_points_xyz(&p, &pts).unwrap();
+        let back = read_points(&p).unwrap();
+        let bits = |v: &[[f64; 3]]| v.iter().flatten().map(|c| c.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&back), bits(&pts));
+        let e = write_points_xyz(&dir.join("n.xyz"), &[[0.0, f64::INFINITY, 0.0]]).unwrap_err().to_string();
+        assert!(e.contains("point 0"), "{e}");
+        assert!(!dir.join("n.xyz").exists());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

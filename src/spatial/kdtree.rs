@@ -1,1 +1,594 @@
-//! (to be written)
+//! Exact k-nearest-neighbour and radius search over 3-D `f32` points.
+//!
+//! A balanced kd-tree built once over a slice: it owns a permuted copy of the points (structure of
+//! arrays), the permutation back to the caller's indices, an implicit node array in pre-order and
+//! leaves as contiguous ranges ("buckets") of at most [`BUCKET`] points.
+//!
+//! Results are exact and deterministic: squared distances are computed by [`dist_sq`] (always the
+//! same `f32` expression, no fused multiply-add), and among equal distances the smaller original
+//! index comes first, so every answer equals a brute-force sort by `(dist_sq, index)`.
+//!
+//! Non-finite input: points with a NaN or infinite coordinate are stored nowhere and never returned
+//! (the pipeline rejects them before; the tree only promises not to panic). Queries with a NaN or
+//! infinite coordinate have no neighbours.
+
+use crate::par;
+
+/// Most points in one leaf bucket. Leaves hold between about `BUCKET / 2` and `BUCKET` points.
+pub const BUCKET: usize = 32;
+
+/// Index used in [`KnnTable`] rows of queries that have no neighbours (non-finite queries).
+pub const NO_NEIGHBOR: u32 = u32::MAX;
+
+/// Subtrees with more points than this are built on two threads (with `parallel`).
+const PAR_BUILD_MIN: usize = 16 * 1024;
+
+/// Queries per parallel task in the batch functions.
+const QUERY_BLOCK: usize = 512;
+
+/// A block of batch queries with its output rows (indices, squared distances).
+type KnnBlock<'a> = (&'a [[f32; 3]], &'a mut [u32], &'a mut [f32]);
+
+/// One search result: the caller's index of a point and its squared distance to the query.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Neighbor {
+    /// Index of the point in the slice given to [`KdTree::build`].
+    pub index: u32,
+    /// Squared Euclidean distance to the query, as computed by [`dist_sq`].
+    pub dist_sq: f32,
+}
+
+impl Neighbor {
+    /// `true` when `self` sorts strictly before `other` by `(dist_sq, index)`.
+    #[inline(always)]
+    fn before(self, other: Neighbor) -> bool {
+        self.dist_sq < other.dist_sq || (self.dist_sq == other.dist_sq && self.index < other.index)
+    }
+}
+
+/// The squared distance used by every query: `(dx*dx + dy*dy) + dz*dz` in `f32`, with
+/// `d = a - b`. Brute-force references must use this function to compare results exactly.
+#[inline(always)]
+pub fn dist_sq(a: [f32; 3], b: [f32; 3]) -> f32 {
+    let dx = a[0] - b[0];
+    let dy = a[1] - b[1];
+    let dz = a[2] - b[2];
+    dx * dx + dy * dy + dz * dz
+}
+
+/// An internal node: points of the left child have `p[dim] <= val`, of the right `p[dim] >= val`.
+#[derive(Clone, Copy, Debug, Default)]
+struct Node {
+    val: f32,
+    dim: u32,
+}
+
+/// A kd-tree over 3-D `f32` points for exact kNN and radius queries.
+///
+/// Layout: a complete binary tree of `depth` levels of internal nodes stored in pre-order (the
+/// left child of node `i` at level `l` is `i + 1`, the right one `i + 2^(depth - l - 1)`), whose
+/// `2^depth` leaves are consecutive ranges of the permuted point arrays.
+#[derive(Clone, Debug)]
+pub struct KdTree {
+    /// Number of points given to `build` (finite or not).
+    n_input: usize,
+    /// Permuted finite points, one array per coordinate; leaf `j` is `leaf_start[j]..leaf_start[j+1]`.
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+    zs: Vec<f32>,
+    /// `idx[p]` is the caller's index of permuted point `p`.
+    idx: Vec<u32>,
+    /// Internal nodes in pre-order, `2^depth - 1` of them.
+    nodes: Vec<Node>,
+    /// Leaf boundaries, `2^depth + 1` entries, non-decreasing, last = number of finite points.
+    leaf_start: Vec<u32>,
+    /// Levels of internal nodes (0: the whole tree is one leaf).
+    depth: u32,
+}
+
+/// Build-time record: a point and its caller index, kept together while partitioning.
+#[derive(Clone, Copy)]
+struct Item {
+    p: [f32; 3],
+    i: u32,
+}
+
+impl KdTree {
+    /// Builds the tree over `points`. Never panics: empty and one-point clouds, duplicates and
+    /// all-identical points are fine. Points with a non-finite coordinate are left out (never
+    /// returned by any query). Uses two threads per level near the top with `parallel`; the tree
+    /// is the same with any thread count.
+    ///
+    /// # Panics
+    /// Only if `points.len()` exceeds `u32::MAX` (indices are `u32`).
+    pub fn build(points: &[[f32; 3]]) -> KdTree {
+        assert!(points.len() <= u32::MAX as usize, "KdTree::build: more than u32::MAX points");
+        let mut items: Vec<Item> = points
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.iter().all(|c| c.is_finite()))
+            .map(|(i, &p)| Item { p, i: i as u32 })
+            .collect();
+        let n = items.len();
+        let mut depth = 0u32;
+        while (n >> depth) > BUCKET {
+            depth += 1;
+        }
+        let mut nodes = vec![Node::default(); (1usize << depth) - 1];
+        build_rec(&mut items, &mut nodes, depth);
+        let mut leaf_start = Vec::with_capacity((1usize << depth) + 1);
+        leaf_bounds(0, n, depth, &mut leaf_start);
+        leaf_start.push(n as u32);
+        KdTree {
+            n_input: points.len(),
+            xs: items.iter().map(|it| it.p[0]).collect(),
+            ys: items.iter().map(|it| it.p[1]).collect(),
+            zs: items.iter().map(|it| it.p[2]).collect(),
+            idx: items.iter().map(|it| it.i).collect(),
+            nodes,
+            leaf_start,
+            depth,
+        }
+    }
+
+    /// Number of points given to [`KdTree::build`], including any non-finite ones left out.
+    pub fn len(&self) -> usize {
+        self.n_input
+    }
+
+    /// `true` when built from an empty slice.
+    pub fn is_empty(&self) -> bool {
+        self.n_input == 0
+    }
+
+    /// Number of points that queries can return (the finite ones; equals `len()` for clean input).
+    pub fn num_indexed(&self) -> usize {
+        self.idx.len()
+    }
+
+    /// The `k` nearest points to `query`, into `out` (cleared first): `min(k, num_indexed())`
+    /// results sorted by `(dist_sq, index)`. `k = 0` or a non-finite query gives no results.
+    pub fn knn(&self, query: [f32; 3], k: usize, out: &mut Vec<Neighbor>) {
+        out.clear();
+        let k = k.min(self.idx.len());
+        if k == 0 || !query.iter().all(|c| c.is_finite()) {
+            return;
+        }
+        out.reserve(k);
+        let mut off = [0.0f32; 3];
+        self.knn_rec(0, 0, 0, &query, &mut off, k, out);
+    }
+
+    /// The nearest point to `query` (smallest index among equally near ones), or `None` for an
+    /// empty tree or a non-finite query.
+    pub fn nearest(&self, query: [f32; 3]) -> Option<Neighbor> {
+        let mut out = Vec::with_capacity(1);
+        self.knn(query, 1, &mut out);
+        out.first().copied()
+    }
+
+    /// All points with `dist_sq <= radius_sq`, into `out` (cleared first), sorted by
+    /// `(dist_sq, index)`. A NaN or negative `radius_sq`, or a non-finite query, gives nothing.
+    pub fn within_radius(&self, query: [f32; 3], radius_sq: f32, out: &mut Vec<Neighbor>) {
+        out.clear();
+        if self.idx.is_empty()
+            || radius_sq.is_nan()
+            || radius_sq < 0.0
+            || !query.iter().all(|c| c.is_finite())
+        {
+            return;
+        }
+        let mut off = [0.0f32; 3];
+        self.radius_rec(0, 0, 0, &query, &mut off, radius_sq, out);
+        out.sort_unstable_by(|a, b| a.dist_sq.total_cmp(&b.dist_sq).then(a.index.cmp(&b.index)));
+    }
+
+    /// [`KdTree::knn`] for every query, in parallel with `parallel`. The table has
+    /// `k = min(k, num_indexed())` columns; rows of non-finite queries are filled with
+    /// [`NO_NEIGHBOR`] and `f32::INFINITY`.
+    pub fn knn_batch(&self, queries: &[[f32; 3]], k: usize) -> KnnTable {
+        let k = k.min(self.idx.len());
+        let nq = queries.len();
+        let mut indices = vec![NO_NEIGHBOR; nq * k];
+        let mut dists = vec![f32::INFINITY; nq * k];
+        if k > 0 {
+            let mut blocks: Vec<KnnBlock> = queries
+                .chunks(QUERY_BLOCK)
+                .zip(indices.chunks_mut(QUERY_BLOCK * k).zip(dists.chunks_mut(QUERY_BLOCK * k)))
+                .map(|(q, (i, d))| (q, i, d))
+                .collect();
+            par::for_each_chunk_mut(&mut blocks, 1, |_, chunk| {
+                let mut buf = Vec::with_capacity(k);
+                for (qs, ii, dd) in chunk.iter_mut() {
+                    for (qi, q) in qs.iter().enumerate() {
+                        self.knn(*q, k, &mut buf);
+                        for (j, nb) in buf.iter().enumerate() {
+                            ii[qi * k + j] = nb.index;
+                            dd[qi * k + j] = nb.dist_sq;
+                        }
+                    }
+                }
+            });
+        }
+        KnnTable { k, n_queries: nq, indices, dist_sq: dists }
+    }
+
+    /// [`KdTree::within_radius`] for every query, in parallel with `parallel`, as a CSR table.
+    pub fn within_radius_batch(&self, queries: &[[f32; 3]], radius_sq: f32) -> RadiusTable {
+        let n_blocks = queries.len().div_ceil(QUERY_BLOCK);
+        let parts = par::map(n_blocks, |b| {
+            let qs = &queries[b * QUERY_BLOCK..((b + 1) * QUERY_BLOCK).min(queries.len())];
+            let mut counts = Vec::with_capacity(qs.len());
+            let mut ii = Vec::new();
+            let mut dd = Vec::new();
+            let mut buf = Vec::new();
+            for q in qs {
+                self.within_radius(*q, radius_sq, &mut buf);
+                counts.push(buf.len());
+                ii.extend(buf.iter().map(|nb| nb.index));
+                dd.extend(buf.iter().map(|nb| nb.dist_sq));
+            }
+            (counts, ii, dd)
+        });
+        let total: usize = parts.iter().map(|p| p.1.len()).sum();
+        let mut offsets = Vec::with_capacity(queries.len() + 1);
+        offsets.push(0);
+        let mut indices = Vec::with_capacity(total);
+        let mut dists = Vec::with_capacity(total);
+        for (counts, ii, dd) in parts {
+            for c in counts {
+                offsets.push(offsets[offsets.len() - 1] + c);
+            }
+            indices.extend_from_slice(&ii);
+            dists.extend_from_slice(&dd);
+        }
+        RadiusTable { offsets, indices, dist_sq: dists }
+    }
+
+    /// Depth-first kNN search. `off[d]` is the distance from the query to the node's box along
+    /// axis `d`; `(off0² + off1²) + off2²` rounds no higher than [`dist_sq`] of any point in the
+    /// box (rounding is monotonic), so pruning when it exceeds the current k-th distance is exact.
+    #[allow(clippy::too_many_arguments)]
+    fn knn_rec(
+        &self,
+        node: usize,
+        level: u32,
+        leaf: usize,
+        q: &[f32; 3],
+        off: &mut [f32; 3],
+        k: usize,
+        buf: &mut Vec<Neighbor>,
+    ) {
+        if level == self.depth {
+            self.scan_leaf_knn(leaf, q, k, buf);
+            return;
+        }
+        let nd = self.nodes[node];
+        let d = nd.dim as usize;
+        let diff = q[d] - nd.val;
+        let half = 1usize << (self.depth - level - 1);
+        let (near, near_leaf, far, far_leaf) = if diff < 0.0 {
+            (node + 1, leaf, node + half, leaf + half)
+        } else {
+            (node + half, leaf + half, node + 1, leaf)
+        };
+        self.knn_rec(near, level + 1, near_leaf, q, off, k, buf);
+        let old = off[d];
+        off[d] = diff.abs();
+        let rd = off[0] * off[0] + off[1] * off[1] + off[2] * off[2];
+        let worst = if buf.len() < k { f32::INFINITY } else { buf[k - 1].dist_sq };
+        if rd <= worst {
+            self.knn_rec(far, level + 1, far_leaf, q, off, k, buf);
+        }
+        off[d] = old;
+    }
+
+    #[inline(always)]
+    fn scan_leaf_knn(&self, leaf: usize, q: &[f32; 3], k: usize, buf: &mut Vec<Neighbor>) {
+        let (s, e) = (self.leaf_start[leaf] as usize, self.leaf_start[leaf + 1] as usize);
+        let (xs, ys, zs, ids) = (&self.xs[s..e], &self.ys[s..e], &self.zs[s..e], &self.idx[s..e]);
+        let mut worst = if buf.len() < k { f32::INFINITY } else { buf[k - 1].dist_sq };
+        for j in 0..xs.len() {
+            let d = dist_sq(*q, [xs[j], ys[j], zs[j]]);
+            if d <= worst {
+                let cand = Neighbor { index: ids[j], dist_sq: d };
+                if buf.len() == k {
+                    if !cand.before(buf[k - 1]) {
+                        continue;
+                    }
+                    buf.pop();
+                }
+                let mut pos = buf.len();
+                while pos > 0 && cand.before(buf[pos - 1]) {
+                    pos -= 1;
+                }
+                buf.insert(pos, cand);
+                if buf.len() == k {
+                    worst = buf[k - 1].dist_sq;
+                }
+            }
+        }
+    }
+
+    /// Depth-first radius search, pruned like [`KdTree::knn_rec`]; results are unsorted.
+    #[allow(clippy::too_many_arguments)]
+    fn radius_rec(
+        &self,
+        node: usize,
+        level: u32,
+        leaf: usize,
+        q: &[f32; 3],
+        off: &mut [f32; 3],
+        radius_sq: f32,
+        out: &mut Vec<Neighbor>,
+    ) {
+        if level == self.depth {
+            let (s, e) = (self.leaf_start[leaf] as usize, self.leaf_start[leaf + 1] as usize);
+            for p in s..e {
+                let d = dist_sq(*q, [self.xs[p], self.ys[p], self.zs[p]]);
+                if d <= radius_sq {
+                    out.push(Neighbor { index: self.idx[p], dist_sq: d });
+                }
+            }
+            return;
+        }
+        let nd = self.nodes[node];
+        let d = nd.dim as usize;
+        let diff = q[d] - nd.val;
+        let half = 1usize << (self.depth - level - 1);
+        let (near, near_leaf, far, far_leaf) = if diff < 0.0 {
+            (node + 1, leaf, node + half, leaf + half)
+        } else {
+            (node + half, leaf + half, node + 1, leaf)
+        };
+        self.radius_rec(near, level + 1, near_leaf, q, off, radius_sq, out);
+        let old = off[d];
+        off[d] = diff.abs();
+        let rd = off[0] * off[0] + off[1] * off[1] + off[2] * off[2];
+        if rd <= radius_sq {
+            self.radius_rec(far, level + 1, far_leaf, q, off, radius_sq, out);
+        }
+        off[d] = old;
+    }
+}
+
+/// Partitions `items` for a subtree with `levels` levels of internal nodes, whose nodes (in
+/// pre-order, `2^levels - 1` of them) are `nodes`. Each node splits its range at the middle along
+/// the axis of widest extent, so left points are `<= val` and right points `>= val` on that axis.
+fn build_rec(items: &mut [Item], nodes: &mut [Node], levels: u32) {
+    if levels == 0 {
+        return;
+    }
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for it in items.iter() {
+        for a in 0..3 {
+            lo[a] = lo[a].min(it.p[a]);
+            hi[a] = hi[a].max(it.p[a]);
+        }
+    }
+    let mut dim = 0;
+    let mut best = f32::NEG_INFINITY;
+    for a in 0..3 {
+        // Finite points only, so the extent is never NaN (it may overflow to +inf, still ordered).
+        let ext = hi[a] - lo[a];
+        if ext > best {
+            best = ext;
+            dim = a;
+        }
+    }
+    let mid = items.len() / 2;
+    let val = if mid < items.len() {
+        items.select_nth_unstable_by(mid, |a, b| a.p[dim].total_cmp(&b.p[dim]));
+        items[mid].p[dim]
+    } else {
+        0.0
+    };
+    nodes[0] = Node { val, dim: dim as u32 };
+    let n = items.len();
+    let (left_items, right_items) = items.split_at_mut(mid);
+    let rest = &mut nodes[1..];
+    let (left_nodes, right_nodes) = rest.split_at_mut(rest.len() / 2);
+    if n > PAR_BUILD_MIN {
+        par::join(
+            || build_rec(left_items, left_nodes, levels - 1),
+            || build_rec(right_items, right_nodes, levels - 1),
+        );
+    } else {
+        build_rec(left_items, left_nodes, levels - 1);
+        build_rec(right_items, right_nodes, levels - 1);
+    }
+}
+
+/// Pushes the start of every leaf of the subtree over `lo..hi` with `levels` internal levels,
+/// left to right, following the same middle split as [`build_rec`].
+fn leaf_bounds(lo: usize, hi: usize, levels: u32, out: &mut Vec<u32>) {
+    if levels == 0 {
+        out.push(lo as u32);
+        return;
+    }
+    let mid = lo + (hi - lo) / 2;
+    leaf_bounds(lo, mid, levels - 1, out);
+    leaf_bounds(mid, hi, levels - 1, out);
+}
+
+/// Results of [`KdTree::knn_batch`]: `n_queries` rows of `k` neighbours, row-major, each row
+/// sorted by `(dist_sq, index)`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct KnnTable {
+    /// Columns per row: `min(requested k, KdTree::num_indexed())`.
+    pub k: usize,
+    /// Number of rows (queries).
+    pub n_queries: usize,
+    /// `n_queries * k` caller indices.
+    pub indices: Vec<u32>,
+    /// `n_queries * k` squared distances.
+    pub dist_sq: Vec<f32>,
+}
+
+impl KnnTable {
+    /// Indices and squared distances of the neighbours of query `i`.
+    ///
+    /// # Panics
+    /// If `i >= n_queries`.
+    pub fn row(&self, i: usize) -> (&[u32], &[f32]) {
+        assert!(i < self.n_queries, "KnnTable::row: row {i} out of {}", self.n_queries);
+        let r = i * self.k..(i + 1) * self.k;
+        (&self.indices[r.clone()], &self.dist_sq[r])
+    }
+
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.n_queries
+    }
+
+    /// `true` when there are no rows.
+    pub fn is_empty(&self) -> bool {
+        self.n_queries == 0
+    }
+}
+
+/// Results of [`KdTree::within_radius_batch`] in compressed rows: the neighbours of query `i` are
+/// `offsets[i]..offsets[i + 1]` of `indices` and `dist_sq`, sorted by `(dist_sq, index)`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RadiusTable {
+    /// `n_queries + 1` non-decreasing row starts, the first 0 and the last `indices.len()`.
+    pub offsets: Vec<usize>,
+    /// Caller indices of all rows, concatenated.
+    pub indices: Vec<u32>,
+    /// Squared distances, parallel to `indices`.
+    pub dist_sq: Vec<f32>,
+}
+
+impl RadiusTable {
+    /// Indices and squared distances of the neighbours of query `i`.
+    ///
+    /// # Panics
+    /// If `i` is not a row.
+    pub fn row(&self, i: usize) -> (&[u32], &[f32]) {
+        assert!(i + 1 < self.offsets.len(), "RadiusTable::row: row {i} out of {}", self.len());
+        let r = self.offsets[i]..self.offsets[i + 1];
+        (&self.indices[r.clone()], &self.dist_sq[r])
+    }
+
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.offsets.len().saturating_sub(1)
+    }
+
+    /// `true` when there are no rows.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    fn brute_knn(points: &[[f32; 3]], q: [f32; 3], k: usize) -> Vec<Neighbor> {
+        let mut all: Vec<Neighbor> = points
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| Neighbor { index: i as u32, dist_sq: dist_sq(q, p) })
+            .collect();
+        all.sort_by(|a, b| a.dist_sq.total_cmp(&b.dist_sq).then(a.index.cmp(&b.index)));
+        all.truncate(k);
+        all
+    }
+
+    fn cloud(n: usize, seed: u64) -> Vec<[f32; 3]> {
+        let mut r = Rng::new(seed);
+        (0..n).map(|_| [r.f32(), r.f32(), r.f32()]).collect()
+    }
+
+    #[test]
+    fn empty_and_one_point() {
+        let t = KdTree::build(&[]);
+        assert!(t.is_empty());
+        let mut out = vec![Neighbor { index: 9, dist_sq: 1.0 }];
+        t.knn([0.0; 3], 5, &mut out);
+        assert!(out.is_empty());
+        assert_eq!(t.nearest([0.0; 3]), None);
+        let tab = t.knn_batch(&[[0.0; 3], [1.0; 3]], 3);
+        assert_eq!((tab.k, tab.len()), (0, 2));
+        assert!(tab.row(1).0.is_empty());
+        let t = KdTree::build(&[[1.0, 2.0, 3.0]]);
+        assert_eq!(t.nearest([1.0, 2.0, 4.0]), Some(Neighbor { index: 0, dist_sq: 1.0 }));
+        t.within_radius([1.0, 2.0, 4.0], 0.5, &mut out);
+        assert!(out.is_empty());
+        t.within_radius([1.0, 2.0, 4.0], 1.0, &mut out);
+        assert_eq!(out.len(), 1);
+    }
+
+    #[test]
+    fn all_identical_points_tie_by_index() {
+        let pts = vec![[0.5f32, -1.0, 2.0]; 1000];
+        let t = KdTree::build(&pts);
+        let mut out = Vec::new();
+        t.knn([0.0; 3], 7, &mut out);
+        assert_eq!(out.iter().map(|n| n.index).collect::<Vec<_>>(), (0..7).collect::<Vec<u32>>());
+        t.within_radius([0.5, -1.0, 2.0], 0.0, &mut out);
+        assert_eq!(out.len(), 1000);
+        assert!(out.windows(2).all(|w| w[0].index < w[1].index));
+    }
+
+    #[test]
+    fn non_finite_points_and_queries() {
+        let mut pts = cloud(200, 3);
+        pts[5] = [f32::NAN, 0.0, 0.0];
+        pts[17] = [0.0, f32::INFINITY, 0.0];
+        let t = KdTree::build(&pts);
+        assert_eq!((t.len(), t.num_indexed()), (200, 198));
+        let mut out = Vec::new();
+        t.knn([0.5; 3], 500, &mut out);
+        assert_eq!(out.len(), 198);
+        assert!(out.iter().all(|n| n.index != 5 && n.index != 17));
+        for q in [[f32::NAN, 0.0, 0.0], [0.0, 0.0, f32::NEG_INFINITY]] {
+            t.knn(q, 3, &mut out);
+            assert!(out.is_empty());
+            t.within_radius(q, f32::INFINITY, &mut out);
+            assert!(out.is_empty());
+            assert_eq!(t.nearest(q), None);
+        }
+        t.within_radius([0.5; 3], f32::NAN, &mut out);
+        assert!(out.is_empty());
+        let tab = t.knn_batch(&[[f32::NAN; 3]], 2);
+        assert_eq!(tab.row(0), (&[NO_NEIGHBOR; 2][..], &[f32::INFINITY; 2][..]));
+    }
+
+    #[test]
+    fn huge_coordinates_overflowing_distances() {
+        let pts = vec![[3e38f32, 0.0, 0.0], [-3e38, 0.0, 0.0], [0.0, 3e38, -3e38], [1.0, 1.0, 1.0]];
+        let t = KdTree::build(&pts);
+        let mut out = Vec::new();
+        for q in [[-3e38f32, 1.0, 0.0], [0.0; 3], [3e38, 3e38, 3e38]] {
+            for k in 0..6 {
+                t.knn(q, k, &mut out);
+                assert_eq!(out, brute_knn(&pts, q, k));
+            }
+        }
+    }
+
+    #[test]
+    fn batch_equals_single_queries() {
+        let pts = cloud(5000, 1);
+        let qs = cloud(1500, 2);
+        let t = KdTree::build(&pts);
+        let tab = t.knn_batch(&qs, 9);
+        let rt = t.within_radius_batch(&qs, 0.004);
+        let mut out = Vec::new();
+        for (i, &q) in qs.iter().enumerate() {
+            t.knn(q, 9, &mut out);
+            let (ii, dd) = tab.row(i);
+            assert_eq!(ii, out.iter().map(|n| n.index).collect::<Vec<_>>());
+            assert_eq!(dd, out.iter().map(|n| n.dist_sq).collect::<Vec<_>>());
+            assert_eq!(out, brute_knn(&pts, q, 9));
+            t.within_radius(q, 0.004, &mut out);
+            let (ii, dd) = rt.row(i);
+            assert_eq!(ii, out.iter().map(|n| n.index).collect::<Vec<_>>());
+            assert_eq!(dd, out.iter().map(|n| n.dist_sq).collect::<Vec<_>>());
+        }
+    }
+}

@@ -12,6 +12,9 @@ mod cmd_train;
 
 use std::process::ExitCode;
 
+/// A subcommand's entry point.
+type RunFn = fn(&[String]) -> point2quad::Result<()>;
+
 const USAGE: &str = "\
 point2quad: point cloud -> pure-quad manifold mesh (Point2Quad, from scratch)
 
@@ -35,7 +38,7 @@ fn main() -> ExitCode {
         return ExitCode::from(2);
     };
     let rest = &argv[1..];
-    let (help, run): (&str, fn(&[String]) -> point2quad::Result<()>) = match cmd.as_str() {
+    let (help, run): (&str, RunFn) = match cmd.as_str() {
         "-h" | "--help" | "help" => {
             print!("{USAGE}");
             return ExitCode::SUCCESS;

@@ -22,13 +22,16 @@
 
 use std::sync::Arc;
 
+use crate::nn::batch_norm::{BatchNorm1d, BatchNormConfig};
+use crate::nn::conv1d::ConvBnAct;
 use crate::nn::kernel_points::scaled_kernel_points;
 use crate::nn::kpconv::{KpConvGeometry, KpConvOp};
+use crate::nn::module::Module;
 use crate::rng::Rng;
 use crate::spatial::kdtree::KdTree;
 use crate::spatial::neighborhoods::{nearest_upsampling, radius_neighborhoods, NeighborCap, Neighborhoods};
 use crate::spatial::subsample::subsample_pyramid;
-use crate::tensor::{Act, BnRefs, Graph, ParamId, ParamKind, ParamStore, Tensor, Var};
+use crate::tensor::{Act, Graph, ParamId, ParamKind, ParamStore, Tensor, Var};
 use crate::{Error, Result};
 
 /// One encoder block of the architecture list.
@@ -370,15 +373,6 @@ impl PointPyramid {
     }
 }
 
-/// A unary layer's parameters.
-#[derive(Clone, Copy, Debug)]
-struct Unary {
-    w: Option<ParamId>,
-    gamma: ParamId,
-    beta: ParamId,
-    bn: BnRefs,
-}
-
 /// A KPConv's weights `[K × C_in × C_out]` and its kernel points (scaled to the radius).
 #[derive(Clone, Debug)]
 struct Conv {
@@ -390,15 +384,15 @@ struct Conv {
 enum Block {
     Simple {
         conv: Conv,
-        bn: Unary,
+        bn: BatchNorm1d,
         level: usize,
     },
     Resnetb {
-        unary1: Option<Unary>,
+        unary1: Option<ConvBnAct>,
         conv: Conv,
-        bn: Unary,
-        unary2: Unary,
-        shortcut: Option<Unary>,
+        bn: BatchNorm1d,
+        unary2: ConvBnAct,
+        shortcut: Option<ConvBnAct>,
         level: usize,
         strided: bool,
     },
@@ -409,8 +403,8 @@ enum Block {
 pub struct Kpfcnn {
     cfg: KpfcnnConfig,
     blocks: Vec<Block>,
-    decoder: Vec<Unary>,
-    head: Unary,
+    decoder: Vec<ConvBnAct>,
+    head: ConvBnAct,
 }
 
 struct Builder<'a> {
@@ -421,34 +415,28 @@ struct Builder<'a> {
 }
 
 impl Builder<'_> {
-    fn uniform(&mut self, name: &str, dims: &[usize], bound: f32) -> Result<ParamId> {
-        let n: usize = dims.iter().product();
-        let data = (0..n).map(|_| (self.rng.f32() * 2.0 - 1.0) * bound).collect();
-        self.params.add(name, ParamKind::Trainable, Tensor::new(dims, data)?)
+    fn bn_config(&self) -> BatchNormConfig {
+        BatchNormConfig { eps: self.cfg.bn_eps, momentum: self.cfg.bn_momentum }
     }
 
-    fn bn(&mut self, name: &str, c: usize, w: Option<ParamId>) -> Result<Unary> {
-        let gamma =
-            self.params.add(&format!("{name}.gamma"), ParamKind::Trainable, Tensor::full(&[c], 1.0)?)?;
-        let beta = self.params.add(&format!("{name}.beta"), ParamKind::Trainable, Tensor::zeros(&[c])?)?;
-        let running_mean =
-            self.params.add(&format!("{name}.running_mean"), ParamKind::Buffer, Tensor::zeros(&[c])?)?;
-        let running_var =
-            self.params.add(&format!("{name}.running_var"), ParamKind::Buffer, Tensor::full(&[c], 1.0)?)?;
-        let bn = BnRefs { running_mean, running_var, eps: self.cfg.bn_eps, momentum: self.cfg.bn_momentum };
-        Ok(Unary { w, gamma, beta, bn })
+    /// The tensor engine's fused unary (conv1d without bias + BN + activation, PyTorch init).
+    fn unary(&mut self, name: &str, c_in: usize, c_out: usize, act: Act) -> Result<ConvBnAct> {
+        let bn = self.bn_config();
+        ConvBnAct::new(self.params, name, c_in, c_out, act, bn, &mut self.rng)
     }
 
-    /// conv1d weight `[out × in]` initialised like PyTorch's Linear (uniform ±1/√in) + BN.
-    fn unary(&mut self, name: &str, c_in: usize, c_out: usize) -> Result<Unary> {
-        let w = self.uniform(&format!("{name}.w"), &[c_out, c_in], 1.0 / (c_in as f32).sqrt())?;
-        self.bn(name, c_out, Some(w))
+    fn bn(&mut self, name: &str, c: usize) -> Result<BatchNorm1d> {
+        let bn = self.bn_config();
+        BatchNorm1d::new(self.params, name, c, bn)
     }
 
     fn conv(&mut self, name: &str, level: usize, c_in: usize, c_out: usize) -> Result<Conv> {
         // Uniform ±1/√(K·C_in): output variance independent of width before batch norm.
         let k = self.cfg.num_kernel_points;
-        let w = self.uniform(&format!("{name}.w"), &[k, c_in, c_out], 1.0 / ((k * c_in) as f32).sqrt())?;
+        let bound = 1.0 / ((k * c_in) as f32).sqrt();
+        let data = (0..k * c_in * c_out).map(|_| (self.rng.f32() * 2.0 - 1.0) * bound).collect();
+        let w =
+            self.params.add(&format!("{name}.weight"), ParamKind::Trainable, Tensor::new(&[k, c_in, c_out], data)?)?;
         let radius = self.cfg.conv_radius * self.cfg.cell(level);
         let seed = self.cfg.seed.wrapping_mul(0x9E37_79B9).wrapping_add(self.n_convs);
         self.n_convs += 1;
@@ -465,6 +453,7 @@ impl Kpfcnn {
     pub fn new(cfg: &KpfcnnConfig, params: &mut ParamStore) -> Result<Self> {
         cfg.validate()?;
         let p = plan(cfg);
+        let leaky = Act::LeakyRelu(cfg.leaky_slope);
         let mut b = Builder { params, rng: Rng::new(cfg.seed), cfg, n_convs: 0 };
         let mut blocks = Vec::with_capacity(p.blocks.len());
         for (i, bp) in p.blocks.iter().enumerate() {
@@ -472,21 +461,21 @@ impl Kpfcnn {
             blocks.push(match bp.kind {
                 BlockKind::Simple => {
                     let conv = b.conv(&format!("{name}.kpconv"), bp.level, bp.c_in, bp.c_out / 2)?;
-                    let bn = b.bn(&format!("{name}.bn"), bp.c_out / 2, None)?;
+                    let bn = b.bn(&format!("{name}.bn"), bp.c_out / 2)?;
                     Block::Simple { conv, bn, level: bp.level }
                 }
                 kind => {
                     let mid = bp.c_out / 4;
                     let unary1 = if bp.c_in != mid {
-                        Some(b.unary(&format!("{name}.unary1"), bp.c_in, mid)?)
+                        Some(b.unary(&format!("{name}.unary1"), bp.c_in, mid, leaky)?)
                     } else {
                         None
                     };
                     let conv = b.conv(&format!("{name}.kpconv"), bp.level, mid, mid)?;
-                    let bn = b.bn(&format!("{name}.bn"), mid, None)?;
-                    let unary2 = b.unary(&format!("{name}.unary2"), mid, bp.c_out)?;
+                    let bn = b.bn(&format!("{name}.bn"), mid)?;
+                    let unary2 = b.unary(&format!("{name}.unary2"), mid, bp.c_out, Act::Identity)?;
                     let shortcut = if bp.c_in != bp.c_out {
-                        Some(b.unary(&format!("{name}.shortcut"), bp.c_in, bp.c_out)?)
+                        Some(b.unary(&format!("{name}.shortcut"), bp.c_in, bp.c_out, Act::Identity)?)
                     } else {
                         None
                     };
@@ -504,21 +493,15 @@ impl Kpfcnn {
         }
         let mut decoder = Vec::with_capacity(p.decoder.len());
         for (i, u) in p.decoder.iter().enumerate() {
-            decoder.push(b.unary(&format!("kpfcnn.dec{i}"), u.c_in, u.c_out)?);
+            decoder.push(b.unary(&format!("kpfcnn.dec{i}"), u.c_in, u.c_out, leaky)?);
         }
-        let head = b.unary("kpfcnn.head", p.head.c_in, p.head.c_out)?;
+        let head = b.unary("kpfcnn.head", p.head.c_in, p.head.c_out, leaky)?;
         Ok(Kpfcnn { cfg: cfg.clone(), blocks, decoder, head })
     }
 
     /// The configuration.
     pub fn config(&self) -> &KpfcnnConfig {
         &self.cfg
-    }
-
-    fn unary(&self, g: &mut Graph, x: Var, u: &Unary, act: Act) -> Result<Var> {
-        let w = u.w.map(|w| g.param(w));
-        let (gamma, beta) = (g.param(u.gamma), g.param(u.beta));
-        g.conv_bn_act(x, w, gamma, beta, u.bn, act)
     }
 
     fn kpconv(
@@ -543,7 +526,8 @@ impl Kpfcnn {
     }
 
     /// Records the network on `g` for the cloud of `pyr` and returns its `[N × out_dim]` features
-    /// (rows in input order). Train/eval behaviour (batch statistics) follows the graph's mode.
+    /// (rows in input order). Train/eval behaviour (batch statistics) follows the graph's mode;
+    /// in a non-recording (eval) graph, intermediates are freed as soon as they are consumed.
     ///
     /// # Errors
     /// `InvalidInput` when `pyr` has a different number of levels than the config implies;
@@ -563,43 +547,68 @@ impl Kpfcnn {
             x = match block {
                 Block::Simple { conv, bn, level } => {
                     let y = self.kpconv(g, x, conv, pyr, *level, false)?;
-                    self.unary(g, y, bn, leaky)?
+                    g.free(x);
+                    let z = bn.forward_act(g, y, leaky)?;
+                    g.free(y);
+                    z
                 }
                 Block::Resnetb { unary1, conv, bn, unary2, shortcut, level, strided } => {
                     if *strided {
                         skips.push(x);
                     }
-                    let mut h = match unary1 {
-                        Some(u) => self.unary(g, x, u, leaky)?,
+                    let h1 = match unary1 {
+                        Some(u) => u.forward(g, x)?,
                         None => x,
                     };
-                    h = self.kpconv(g, h, conv, pyr, *level, *strided)?;
-                    h = self.unary(g, h, bn, leaky)?;
-                    h = self.unary(g, h, unary2, Act::Identity)?;
-                    let mut sc = if *strided {
+                    let h2 = self.kpconv(g, h1, conv, pyr, *level, *strided)?;
+                    if h1 != x {
+                        g.free(h1);
+                    }
+                    let h3 = bn.forward_act(g, h2, leaky)?;
+                    g.free(h2);
+                    let h4 = unary2.forward(g, h3)?;
+                    g.free(h3);
+                    let pooled = if *strided {
                         let nb = &pyr.pool[*level];
                         g.max_neighbors(x, &nb.indices, nb.cap)?
                     } else {
                         x
                     };
-                    if let Some(u) = shortcut {
-                        sc = self.unary(g, sc, u, Act::Identity)?;
+                    let sc = match shortcut {
+                        Some(u) => u.forward(g, pooled)?,
+                        None => pooled,
+                    };
+                    let s = g.add(h4, sc)?;
+                    g.free(h4);
+                    // The block input stays alive only when it is a skip link.
+                    for v in [sc, pooled, x] {
+                        if !skips.contains(&v) {
+                            g.free(v);
+                        }
                     }
-                    let s = g.add(h, sc)?;
-                    g.leaky_relu(s, self.cfg.leaky_slope)?
+                    let out = g.leaky_relu(s, self.cfg.leaky_slope)?;
+                    g.free(s);
+                    out
                 }
             };
         }
         for (i, u) in self.decoder.iter().enumerate() {
             let level = self.decoder.len() - 1 - i;
             let up = g.gather_rows(x, pyr.upsample[level].clone(), false)?;
+            g.free(x);
             let skip = skips.pop().expect("internal error: one skip per strided block");
             let cat = g.concat_cols(&[up, skip])?;
-            x = self.unary(g, cat, u, leaky)?;
+            g.free(up);
+            g.free(skip);
+            x = u.forward(g, cat)?;
+            g.free(cat);
         }
-        self.unary(g, x, &self.head, leaky)
+        let out = self.head.forward(g, x)?;
+        g.free(x);
+        Ok(out)
     }
 }
+
 
 #[cfg(test)]
 mod tests {

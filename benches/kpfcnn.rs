@@ -1,4 +1,4 @@
-//! KPFCNN benchmark: forward and forward + backward on a 10,000-point cloud for the `default`
+//! KPFCNN benchmark: forward and forward + backward on a 10,000-point cloud (torus vertices) for the `default`
 //! and `paper` presets, with peak memory and a per-level split (neighbour search vs KPConv).
 //! Each preset runs in its own child process so that its peak RSS is its own.
 //! Lines: `bench <name> <value> <unit>`, medians of several runs after a warm-up.
@@ -15,21 +15,12 @@ use point2quad::tensor::{Grads, Graph, ParamStore, Tensor};
 
 const N: usize = 10_000;
 
-/// A deterministic closed surface in the unit ball: a sphere of radius 0.8 with smooth bumps,
-/// sampled on a jittered Fibonacci lattice.
+/// The 10,000 vertices of a quad-mesh torus (`mesh::shapes::torus`, 200 × 50, major radius 0.7,
+/// minor 0.3: inside the unit ball, spacing 0.022–0.038 ≈ the 0.03 level-0 cell).
 fn cloud() -> Vec<[f32; 3]> {
-    let mut rng = Rng::new(0);
-    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    (0..N)
-        .map(|i| {
-            let z = 1.0 - 2.0 * (i as f64 + rng.f64()) / N as f64;
-            let rho = (1.0 - z * z).max(0.0).sqrt();
-            let t = golden * i as f64;
-            let (x, y) = (rho * t.cos(), rho * t.sin());
-            let r = 0.8 + 0.1 * (3.0 * x).sin() * (4.0 * y).cos() + 0.05 * (5.0 * z).sin();
-            [(r * x) as f32, (r * y) as f32, (r * z) as f32]
-        })
-        .collect()
+    let m = point2quad::mesh::shapes::torus(200, 50, 0.7, 0.3);
+    assert_eq!(m.vertices.len(), N, "torus vertex count");
+    m.vertices.iter().map(|p| [p[0] as f32, p[1] as f32, p[2] as f32]).collect()
 }
 
 fn median_ms(runs: usize, mut f: impl FnMut()) -> f64 {

@@ -245,7 +245,10 @@ fn degenerate_clouds_give_results_or_clear_errors() {
     assert!(matches!(err, point2quad::Error::Shape { .. }), "{err}");
     drop(g);
     // Duplicates and a collinear cloud.
-    let line: Vec<[f32; 3]> = (0..60).map(|i| [i as f32 * 0.02 - 0.6, 0.0, 0.0]).chain(std::iter::repeat([0.0; 3]).take(10)).collect();
+    let line: Vec<[f32; 3]> = (0..60)
+        .map(|i| [i as f32 * 0.02 - 0.6, 0.0, 0.0])
+        .chain(std::iter::repeat([0.0; 3]).take(10))
+        .collect();
     let pyr = prepare(&line, &cfg).unwrap();
     let out = run(&cfg, &mut ps, &net, &pyr, true);
     assert_eq!(out.dims(), &[70, cfg.out_dim]);
@@ -262,4 +265,23 @@ fn degenerate_clouds_give_results_or_clear_errors() {
     let other = prepare(&line, &KpfcnnConfig::paper()).unwrap();
     let mut g = Graph::eval(&mut ps);
     assert!(net.forward(&mut g, &other).is_err());
+}
+
+#[test]
+fn xyz_input_option_feeds_coordinates() {
+    use point2quad::nn::kpfcnn::InputFeatures;
+    let cfg = KpfcnnConfig { input: InputFeatures::OnesXyz, ..kpc::tiny_config() };
+    let pts = kpc::sphere_cloud(120, 0.5, [0.0; 3], 11);
+    let pyr = prepare(&pts, &cfg).unwrap();
+    let x = pyr.input_features(InputFeatures::OnesXyz).unwrap();
+    assert_eq!(x.dims(), &[120, 4]);
+    for (i, p) in pts.iter().enumerate() {
+        assert_eq!(x.row(i), &[1.0, p[0], p[1], p[2]]);
+    }
+    let mut ps = ParamStore::new();
+    let net = Kpfcnn::new(&cfg, &mut ps).unwrap();
+    assert_eq!(ps.num_trainable(), cfg.param_count());
+    assert_eq!(cfg.param_count(), kpc::tiny_config().param_count() + 3 * 15 * 4);
+    let out = run(&cfg, &mut ps, &net, &pyr, true);
+    assert_eq!(out.dims(), &[120, cfg.out_dim]);
 }

@@ -88,6 +88,7 @@ impl KpConvGeometry {
             )));
         }
         let inv_sigma = 1.0 / sigma;
+        let sigma_sq = sigma * sigma;
         let n_blocks = queries.len().div_ceil(GEOM_BLOCK);
         let blocks: Vec<(Vec<usize>, Vec<InfluenceEntry>)> = par::map(n_blocks, |b| {
             let q0 = b * GEOM_BLOCK;
@@ -104,9 +105,13 @@ impl KpConvGeometry {
                     let y = [x[0] - qp[0], x[1] - qp[1], x[2] - qp[2]];
                     for (k, kp) in kernel.iter().enumerate() {
                         let d = [y[0] - kp[0], y[1] - kp[1], y[2] - kp[2]];
-                        let h = 1.0 - (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() * inv_sigma;
-                        if h > 0.0 {
-                            entries.push(InfluenceEntry { support: j, kernel: k as u32, h });
+                        let d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+                        // Most (point, kernel point) pairs are out of reach: test before the sqrt.
+                        if d2 < sigma_sq {
+                            let h = 1.0 - d2.sqrt() * inv_sigma;
+                            if h > 0.0 {
+                                entries.push(InfluenceEntry { support: j, kernel: k as u32, h });
+                            }
                         }
                     }
                 }

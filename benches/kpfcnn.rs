@@ -153,6 +153,19 @@ fn run_preset(name: &str) {
     });
     println!("bench kpfcnn_fwdbwd_10k_{name} {t_fb:.2} ms");
     println!("bench kpfcnn_fwdbwd_cpu_10k_{name} {t_fb_cpu:.0} ms");
+    // The same with the KPConv influences precomputed once per cloud (reusable across epochs).
+    let geoms = net.geometries(&pyr).expect("geometry");
+    let (t_fbc, t_fbc_cpu) = timed(runs, || {
+        let mut grads = Grads::new();
+        let mut g = Graph::train(&mut params);
+        let out = net.forward_with(&mut g, &pyr, &geoms).expect("forward");
+        let s = Tensor::new(&[N, cfg.out_dim], seed.clone()).expect("shape");
+        g.backward_from(out, s, &mut grads).expect("backward");
+        std::hint::black_box(grads.norm_sq());
+    });
+    println!("bench kpfcnn_fwdbwd_cached_geometry_10k_{name} {t_fbc:.2} ms");
+    println!("bench kpfcnn_fwdbwd_cached_geometry_cpu_10k_{name} {t_fbc_cpu:.0} ms");
+    drop(geoms);
     per_level(name, &cfg, &pts, &pyr, runs);
     if let Some(rss) = peak_rss_mib() {
         println!("bench kpfcnn_peak_rss_10k_{name} {rss:.0} MiB");

@@ -285,3 +285,21 @@ fn xyz_input_option_feeds_coordinates() {
     let out = run(&cfg, &mut ps, &net, &pyr, true);
     assert_eq!(out.dims(), &[120, cfg.out_dim]);
 }
+
+#[test]
+fn precomputed_geometries_give_the_same_features() {
+    let cfg = kpc::tiny_config();
+    let pts = kpc::sphere_cloud(200, 0.6, [0.0; 3], 12);
+    let pyr = prepare(&pts, &cfg).unwrap();
+    let mut ps = ParamStore::new();
+    let net = Kpfcnn::new(&cfg, &mut ps).unwrap();
+    let geoms = net.geometries(&pyr).unwrap();
+    assert_eq!(geoms.len(), cfg.kpconv_layers().len());
+    let a = run(&cfg, &mut ps, &net, &pyr, true);
+    let mut g = Graph::train(&mut ps);
+    let out = net.forward_with(&mut g, &pyr, &geoms).unwrap();
+    assert_eq!(g.value(out).data(), a.data());
+    assert!(net.forward_with(&mut g, &pyr, &geoms[1..]).is_err());
+    let other = prepare(&kpc::sphere_cloud(150, 0.6, [0.0; 3], 13), &cfg).unwrap();
+    assert!(net.forward_with(&mut g, &other, &geoms).is_err());
+}

@@ -435,8 +435,11 @@ impl Builder<'_> {
         let k = self.cfg.num_kernel_points;
         let bound = 1.0 / ((k * c_in) as f32).sqrt();
         let data = (0..k * c_in * c_out).map(|_| (self.rng.f32() * 2.0 - 1.0) * bound).collect();
-        let w =
-            self.params.add(&format!("{name}.weight"), ParamKind::Trainable, Tensor::new(&[k, c_in, c_out], data)?)?;
+        let w = self.params.add(
+            &format!("{name}.weight"),
+            ParamKind::Trainable,
+            Tensor::new(&[k, c_in, c_out], data)?,
+        )?;
         let radius = self.cfg.conv_radius * self.cfg.cell(level);
         let seed = self.cfg.seed.wrapping_mul(0x9E37_79B9).wrapping_add(self.n_convs);
         self.n_convs += 1;
@@ -504,35 +507,45 @@ impl Kpfcnn {
         &self.cfg
     }
 
-    fn kpconv(
+    /// The KPConv layers' parameters in execution order.
+    fn convs(&self) -> impl Iterator<Item = (&Conv, usize, bool)> {
+        self.blocks.iter().map(|b| match b {
+            Block::Simple { conv, level, .. } => (conv, *level, false),
+            Block::Resnetb { conv, level, strided, .. } => (conv, *level, *strided),
+        })
+    }
+
+    fn geometry(
         &self,
-        g: &mut Graph,
-        x: Var,
         conv: &Conv,
         pyr: &PointPyramid,
         level: usize,
         strided: bool,
-    ) -> Result<Var> {
+    ) -> Result<KpConvGeometry> {
         let (queries, nb) = if strided {
             (&pyr.points[level + 1], &pyr.pool[level])
         } else {
             (&pyr.points[level], &pyr.conv[level])
         };
         let sigma = self.cfg.kp_extent * pyr.cells[level];
-        let geom =
-            KpConvGeometry::new(queries, &pyr.points[level], &nb.indices, nb.cap, &conv.kernel, sigma)?;
-        let w = g.param(conv.w);
-        g.custom(Box::new(KpConvOp::new(Arc::new(geom))), &[x, w])
+        KpConvGeometry::new(queries, &pyr.points[level], &nb.indices, nb.cap, &conv.kernel, sigma)
     }
 
-    /// Records the network on `g` for the cloud of `pyr` and returns its `[N × out_dim]` features
-    /// (rows in input order). Train/eval behaviour (batch statistics) follows the graph's mode;
-    /// in a non-recording (eval) graph, intermediates are freed as soon as they are consumed.
+    /// The kernel influences of every KPConv layer on the cloud of `pyr` (they depend only on
+    /// geometry and the fixed kernel points). Keep them with the pyramid and pass them to
+    /// [`Kpfcnn::forward_with`] to skip recomputing them each epoch; they cost about
+    /// 12 bytes × (non-zero influences), e.g. ~9 MB per level-0 layer for 10,000 points.
     ///
     /// # Errors
-    /// `InvalidInput` when `pyr` has a different number of levels than the config implies;
-    /// `Shape` from batch norm in train mode when a level has fewer than 2 points.
-    pub fn forward(&self, g: &mut Graph, pyr: &PointPyramid) -> Result<Var> {
+    /// As [`Kpfcnn::forward`].
+    pub fn geometries(&self, pyr: &PointPyramid) -> Result<Vec<Arc<KpConvGeometry>>> {
+        self.check_pyramid(pyr)?;
+        self.convs()
+            .map(|(conv, level, strided)| Ok(Arc::new(self.geometry(conv, pyr, level, strided)?)))
+            .collect()
+    }
+
+    fn check_pyramid(&self, pyr: &PointPyramid) -> Result<()> {
         if pyr.num_levels() != self.cfg.num_levels() {
             return Err(Error::invalid(format!(
                 "pyramid has {} levels, the network needs {}",
@@ -540,13 +553,71 @@ impl Kpfcnn {
                 self.cfg.num_levels()
             )));
         }
+        Ok(())
+    }
+
+    /// Records the network on `g` for the cloud of `pyr` and returns its `[N × out_dim]` features
+    /// (rows in input order), computing the KPConv influences on the fly.
+    /// Train/eval behaviour (batch statistics) follows the graph's mode; in a non-recording
+    /// (eval) graph, intermediates are freed as soon as they are consumed.
+    ///
+    /// # Errors
+    /// `InvalidInput` when `pyr` has a different number of levels than the config implies;
+    /// `Shape` from batch norm in train mode when a level has fewer than 2 points.
+    pub fn forward(&self, g: &mut Graph, pyr: &PointPyramid) -> Result<Var> {
+        self.forward_impl(g, pyr, None)
+    }
+
+    /// [`Kpfcnn::forward`] with influences precomputed by [`Kpfcnn::geometries`] for this pyramid.
+    ///
+    /// # Errors
+    /// As [`Kpfcnn::forward`]; `InvalidInput` when `geoms` does not match the network's layers.
+    pub fn forward_with(
+        &self,
+        g: &mut Graph,
+        pyr: &PointPyramid,
+        geoms: &[Arc<KpConvGeometry>],
+    ) -> Result<Var> {
+        let n = self.convs().count();
+        let ok = geoms.len() == n
+            && self.convs().zip(geoms).all(|((_, level, strided), geo)| {
+                let q = if strided { pyr.points.get(level + 1) } else { pyr.points.get(level) };
+                q.map(|q| q.len()) == Some(geo.n_queries)
+                    && pyr.points.get(level).map(|s| s.len()) == Some(geo.n_support)
+            });
+        if !ok {
+            return Err(Error::invalid(format!(
+                "{} precomputed geometries do not match this network's {n} KPConv layers and pyramid",
+                geoms.len()
+            )));
+        }
+        self.forward_impl(g, pyr, Some(geoms))
+    }
+
+    fn forward_impl(
+        &self,
+        g: &mut Graph,
+        pyr: &PointPyramid,
+        geoms: Option<&[Arc<KpConvGeometry>]>,
+    ) -> Result<Var> {
+        self.check_pyramid(pyr)?;
+        let mut layer = 0usize;
+        let mut kpconv = |g: &mut Graph, x: Var, conv: &Conv, level: usize, strided: bool| -> Result<Var> {
+            let geom = match geoms {
+                Some(gs) => gs[layer].clone(),
+                None => Arc::new(self.geometry(conv, pyr, level, strided)?),
+            };
+            layer += 1;
+            let w = g.param(conv.w);
+            g.custom(Box::new(KpConvOp::new(geom)), &[x, w])
+        };
         let leaky = Act::LeakyRelu(self.cfg.leaky_slope);
         let mut x = g.input(pyr.input_features(self.cfg.input)?);
         let mut skips = Vec::new();
         for block in &self.blocks {
             x = match block {
                 Block::Simple { conv, bn, level } => {
-                    let y = self.kpconv(g, x, conv, pyr, *level, false)?;
+                    let y = kpconv(g, x, conv, *level, false)?;
                     g.free(x);
                     let z = bn.forward_act(g, y, leaky)?;
                     g.free(y);
@@ -560,7 +631,7 @@ impl Kpfcnn {
                         Some(u) => u.forward(g, x)?,
                         None => x,
                     };
-                    let h2 = self.kpconv(g, h1, conv, pyr, *level, *strided)?;
+                    let h2 = kpconv(g, h1, conv, *level, *strided)?;
                     if h1 != x {
                         g.free(h1);
                     }
@@ -608,7 +679,6 @@ impl Kpfcnn {
         Ok(out)
     }
 }
-
 
 #[cfg(test)]
 mod tests {

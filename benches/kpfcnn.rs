@@ -178,6 +178,19 @@ fn main() {
         run_preset(args.get(pos + 1).map(String::as_str).unwrap_or("default"));
         return;
     }
+    // `cargo bench` passes `--bench`; `cargo test --all-targets` runs this binary without it
+    // (harness = false), where a smoke run of the small preset is enough.
+    if !args.iter().any(|a| a == "--bench") {
+        let cfg = KpfcnnConfig::default_preset();
+        let pyr = prepare(&cloud(), &cfg).expect("valid cloud");
+        let mut params = ParamStore::new();
+        let net = Kpfcnn::new(&cfg, &mut params).expect("valid preset");
+        let mut g = Graph::eval(&mut params);
+        let out = net.forward(&mut g, &pyr).expect("forward");
+        assert_eq!(g.value(out).dims(), &[N, cfg.out_dim]);
+        eprintln!("kpfcnn bench: smoke run only; `cargo bench --bench kpfcnn` measures");
+        return;
+    }
     println!("bench kpfcnn_threads {} threads", point2quad::par::num_threads());
     let exe = std::env::current_exe().expect("own path");
     for preset in ["default", "paper"] {

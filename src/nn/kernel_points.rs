@@ -25,8 +25,8 @@ pub const NUM_STARTS: usize = 16;
 /// Gradient-descent iterations per start (stops earlier once the moves become negligible).
 const MAX_ITERS: usize = 4000;
 
-/// Largest K accepted (the optimisation is O(K²) per iteration; KPConv uses 15).
-pub const MAX_KERNEL_POINTS: usize = 200;
+/// Largest K accepted (the optimisation is O(K²) per iteration; KPConv uses 15, at most ~45).
+pub const MAX_KERNEL_POINTS: usize = 64;
 
 type Cache = Mutex<HashMap<(usize, u64), Arc<[[f32; 3]]>>>;
 

@@ -205,6 +205,40 @@ fn gemm(
     cv.gemm(alpha, &av, &bv, beta);
 }
 
+/// Columns per parallel task when a GEMM has too few rows to split by rows.
+const COL_BLOCK: usize = 128;
+
+/// `c (m×n, row-major) = a · b` split over fixed blocks of [`COL_BLOCK`] columns, each computed
+/// into its own buffer and copied into place. Every element is produced by one GEMM call with
+/// the same reduction over k, so the result does not depend on the thread count.
+#[allow(clippy::too_many_arguments)]
+fn gemm_col_split(
+    m: usize,
+    k: usize,
+    n: usize,
+    a: &[f32],
+    a_strides: (usize, usize),
+    b: &[f32],
+    b_strides: (usize, usize),
+    c: &mut [f32],
+) {
+    let n_blocks = n.div_ceil(COL_BLOCK);
+    let blocks: Vec<Vec<f32>> = par::map(n_blocks, |bi| {
+        let c0 = bi * COL_BLOCK;
+        let cb = COL_BLOCK.min(n - c0);
+        let mut tmp = vec![0.0f32; m * cb];
+        gemm(m, k, cb, 1.0, a, a_strides, &b[c0 * b_strides.1..], b_strides, 0.0, &mut tmp);
+        tmp
+    });
+    for (bi, tmp) in blocks.iter().enumerate() {
+        let c0 = bi * COL_BLOCK;
+        let cb = COL_BLOCK.min(n - c0);
+        for r in 0..m {
+            c[r * n + c0..r * n + c0 + cb].copy_from_slice(&tmp[r * cb..(r + 1) * cb]);
+        }
+    }
+}
+
 /// Output rows per parallel task: a task's gathered block A (rows × K·C_in) stays near 4 MiB,
 /// and at least 128 rows share one packing of the weights (GEMM packs W once per call, which
 /// costs as much as the multiply itself for a few dozen rows). Independent of the thread count.
@@ -274,14 +308,21 @@ pub fn kpconv_forward(
     if c_out == 0 {
         return Ok(out);
     }
-    par::for_each_chunk_mut(&mut out, rows * c_out, |ci, chunk| {
-        let q0 = ci * rows;
-        let n = chunk.len() / c_out;
-        // One buffer per task, reused for all of the task's rows.
-        let mut a = vec![0.0f32; n * kc];
-        gather_block(geom, features, c_in, q0, n, &mut a);
-        gemm(n, kc, c_out, 1.0, &a, (kc, 1), weights, (c_out, 1), 0.0, chunk);
-    });
+    if geom.n_queries >= 2 * rows || c_out < 2 * COL_BLOCK {
+        par::for_each_chunk_mut(&mut out, rows * c_out, |ci, chunk| {
+            let q0 = ci * rows;
+            let n = chunk.len() / c_out;
+            // One buffer per task, reused for all of the task's rows.
+            let mut a = vec![0.0f32; n * kc];
+            gather_block(geom, features, c_in, q0, n, &mut a);
+            gemm(n, kc, c_out, 1.0, &a, (kc, 1), weights, (c_out, 1), 0.0, chunk);
+        });
+    } else {
+        // Few points, wide layers (the coarse levels): one gather, the GEMM split by columns.
+        let mut a = vec![0.0f32; geom.n_queries * kc];
+        gather_block(geom, features, c_in, 0, geom.n_queries, &mut a);
+        gemm_col_split(geom.n_queries, kc, c_out, &a, (kc, 1), weights, (c_out, 1), &mut out);
+    }
     Ok(out)
 }
 
@@ -340,11 +381,15 @@ pub fn kpconv_backward_select(
     }
     // dA = dOut · Wᵀ (nq × kc).
     let mut grad_a = vec![0.0f32; nq * kc];
-    par::for_each_chunk_mut(&mut grad_a, rows * kc, |ci, chunk| {
-        let q0 = ci * rows;
-        let n = chunk.len() / kc.max(1);
-        gemm(n, c_out, kc, 1.0, &grad_out[q0 * c_out..], (c_out, 1), weights, (1, c_out), 0.0, chunk);
-    });
+    if nq >= 2 * rows || kc < 2 * COL_BLOCK {
+        par::for_each_chunk_mut(&mut grad_a, rows * kc, |ci, chunk| {
+            let q0 = ci * rows;
+            let n = chunk.len() / kc.max(1);
+            gemm(n, c_out, kc, 1.0, &grad_out[q0 * c_out..], (c_out, 1), weights, (1, c_out), 0.0, chunk);
+        });
+    } else {
+        gemm_col_split(nq, c_out, kc, grad_out, (c_out, 1), weights, (1, c_out), &mut grad_a);
+    }
     // df_j = Σ_{(q,k) reading j} h · dA_q[k], gathered per support point.
     let (t_off, t_entries) = geom.transpose();
     let mut grad_f = vec![0.0f32; geom.n_support * c_in];
@@ -532,6 +577,46 @@ mod tests {
         let want = naive(&q, &s, &nb, cap, &kp, 0.3, &f, ci, &w, co);
         for (a, b) in out.iter().zip(&want) {
             assert!((a - b).abs() < 1e-4, "{a} vs {b}");
+        }
+    }
+
+    /// Few points and wide layers take the column-split GEMM path (forward and dA): compare
+    /// forward with the formula and both gradients with direct loops over the influences.
+    #[test]
+    fn column_split_path_matches_direct_loops() {
+        let mut rng = crate::rng::Rng::new(8);
+        let s: Vec<[f32; 3]> = (0..30).map(|_| [rng.f32(), rng.f32(), rng.f32()]).collect();
+        let q: Vec<[f32; 3]> = s.iter().step_by(3).copied().collect();
+        let cap = 12;
+        let nb: Vec<u32> = (0..q.len() * cap).map(|_| rng.below(31) as u32).collect();
+        let kp = crate::nn::kernel_points::scaled_kernel_points(15, 2, 0.6).unwrap();
+        let (ci, co) = (20, 300);
+        assert!(q.len() < 2 * rows_per_task(15 * ci) && co >= 2 * COL_BLOCK && 15 * ci >= 2 * COL_BLOCK);
+        let f: Vec<f32> = (0..30 * ci).map(|_| rng.f32() - 0.5).collect();
+        let w: Vec<f32> = (0..15 * ci * co).map(|_| rng.f32() - 0.5).collect();
+        let go: Vec<f32> = (0..q.len() * co).map(|_| rng.f32() - 0.5).collect();
+        let g = KpConvGeometry::new(&q, &s, &nb, cap, &kp, 0.4).unwrap();
+        let out = kpconv_forward(&g, &f, ci, &w, co).unwrap();
+        let want = naive(&q, &s, &nb, cap, &kp, 0.4, &f, ci, &w, co);
+        for (a, b) in out.iter().zip(&want) {
+            assert!((a - b).abs() < 1e-3 * (1.0 + b.abs()), "{a} vs {b}");
+        }
+        let (gf, gw) = kpconv_backward(&g, &f, ci, &w, co, &go).unwrap();
+        let (mut rf, mut rw) = (vec![0.0f64; gf.len()], vec![0.0f64; gw.len()]);
+        for qi in 0..q.len() {
+            for e in &g.entries[g.offsets[qi]..g.offsets[qi + 1]] {
+                let (j, k) = (e.support as usize, e.kernel as usize);
+                for c in 0..ci {
+                    for o in 0..co {
+                        let wi = (k * ci + c) * co + o;
+                        rw[wi] += e.h as f64 * f[j * ci + c] as f64 * go[qi * co + o] as f64;
+                        rf[j * ci + c] += e.h as f64 * w[wi] as f64 * go[qi * co + o] as f64;
+                    }
+                }
+            }
+        }
+        for (a, b) in gf.iter().zip(&rf).chain(gw.iter().zip(&rw)) {
+            assert!((*a as f64 - b).abs() < 1e-3 * (1.0 + b.abs()), "{a} vs {b}");
         }
     }
 

@@ -8,7 +8,10 @@
 //! LeakyReLU; simple = KPConv(C_in → C/2) + BN + LeakyReLU; ResNet bottleneck = unary down to C/4
 //! (skipped when already C/4) → KPConv → BN + LeakyReLU → unary up to C (no activation) + shortcut
 //! (unary without activation when widths differ; max-pool over the pooling neighbourhood when
-//! strided), then LeakyReLU.
+//! strided, shadow slots counting as a zero feature as in the authors' code), then LeakyReLU.
+//! Neighbour caps are calibrated per cloud in [`prepare`] (the authors calibrate once over their
+//! training batches); with sum aggregation a different cap only changes which far neighbours of
+//! the densest 10% of points are dropped.
 //!
 //! | preset | blocks | widths | levels (cells) | parameters |
 //! |---|---|---|---|---|

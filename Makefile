@@ -57,6 +57,7 @@ test-heavy:
 
 bench:
 	$(CARGO) bench --bench kdtree
+	$(CARGO) bench --bench face_net
 	$(CARGO) bench --bench kpfcnn
 
 coverage: build

@@ -36,6 +36,25 @@ pub fn for_each_chunk_mut<T: Send, F: Fn(usize, &mut [T]) + Sync + Send>(
     }
 }
 
+/// Calls `f(chunk_index, chunk)` on consecutive chunks of `chunk_len` elements and
+/// returns the results in chunk order (parallel when enabled). For per-chunk partial
+/// results (e.g. sums) that are then combined in a fixed order.
+pub fn map_chunks_mut<T: Send, R: Send, F: Fn(usize, &mut [T]) -> R + Sync + Send>(
+    data: &mut [T],
+    chunk_len: usize,
+    f: F,
+) -> Vec<R> {
+    let chunk_len = chunk_len.max(1);
+    #[cfg(feature = "parallel")]
+    {
+        data.par_chunks_mut(chunk_len).enumerate().map(|(i, c)| f(i, c)).collect()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        data.chunks_mut(chunk_len).enumerate().map(|(i, c)| f(i, c)).collect()
+    }
+}
+
 /// Runs two closures, concurrently when enabled.
 pub fn join<A: Send, B: Send>(a: impl FnOnce() -> A + Send, b: impl FnOnce() -> B + Send) -> (A, B) {
     #[cfg(feature = "parallel")]

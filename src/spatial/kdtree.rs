@@ -6,7 +6,10 @@
 //!
 //! Results are exact and deterministic: squared distances are computed by [`dist_sq`] (always the
 //! same `f32` expression, no fused multiply-add), and among equal distances the smaller original
-//! index comes first, so every answer equals a brute-force sort by `(dist_sq, index)`.
+//! index comes first, so every answer equals a brute-force sort by `(dist_sq, index)`. Searches
+//! keep results as packed `(dist_sq bits, index)` keys so that this order is one integer compare.
+//! Batch queries run in the order of the leaves they fall in (cache locality), in parallel with
+//! the `parallel` feature, and give exactly the single-query answers whatever the thread count.
 //!
 //! Non-finite input: points with a NaN or infinite coordinate are stored nowhere and never returned
 //! (the pipeline rejects them before; the tree only promises not to panic). Queries with a NaN or
@@ -23,11 +26,37 @@ pub const NO_NEIGHBOR: u32 = u32::MAX;
 /// Subtrees with more points than this are built on two threads (with `parallel`).
 const PAR_BUILD_MIN: usize = 16 * 1024;
 
+/// Points sampled to estimate a node's extent when choosing its split axis.
+const EXTENT_SAMPLE: usize = 256;
+
 /// Queries per parallel task in the batch functions.
 const QUERY_BLOCK: usize = 512;
 
-/// A block of batch queries with its output rows (indices, squared distances).
-type KnnBlock<'a> = (&'a [[f32; 3]], &'a mut [u32], &'a mut [f32]);
+/// Padding of a kNN key buffer before it fills: `key(inf, u32::MAX)`, above every real key (real
+/// indices are below `u32::MAX`), and its distance part reads back as `+inf`.
+const SENTINEL: u64 = 0x7F80_0000_FFFF_FFFF;
+
+/// Largest `k` whose search buffer lives on the stack in [`KdTree::knn`].
+const STACK_K: usize = 64;
+
+/// A search result packed so that one integer comparison orders by `(dist_sq, index)`: squared
+/// distances are never negative (nor -0 or NaN: finite points and queries only), and the bit
+/// patterns of non-negative floats are ordered like their values.
+#[inline(always)]
+fn key(dist_sq: f32, index: u32) -> u64 {
+    ((dist_sq.to_bits() as u64) << 32) | index as u64
+}
+
+/// The distance part of a key.
+#[inline(always)]
+fn kth_dist(key: u64) -> f32 {
+    f32::from_bits((key >> 32) as u32)
+}
+
+#[inline(always)]
+fn unkey(key: u64) -> Neighbor {
+    Neighbor { index: key as u32, dist_sq: f32::from_bits((key >> 32) as u32) }
+}
 
 /// One search result: the caller's index of a point and its squared distance to the query.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -36,14 +65,6 @@ pub struct Neighbor {
     pub index: u32,
     /// Squared Euclidean distance to the query, as computed by [`dist_sq`].
     pub dist_sq: f32,
-}
-
-impl Neighbor {
-    /// `true` when `self` sorts strictly before `other` by `(dist_sq, index)`.
-    #[inline(always)]
-    fn before(self, other: Neighbor) -> bool {
-        self.dist_sq < other.dist_sq || (self.dist_sq == other.dist_sq && self.index < other.index)
-    }
 }
 
 /// The squared distance used by every query: `(dx*dx + dy*dy) + dz*dz` in `f32`, with
@@ -111,7 +132,8 @@ impl KdTree {
             .collect();
         let n = items.len();
         let mut depth = 0u32;
-        while (n >> depth) > BUCKET {
+        // Middle splits give leaves of at most ceil(n / 2^depth) points.
+        while n.div_ceil(1 << depth) > BUCKET {
             depth += 1;
         }
         let mut nodes = vec![Node::default(); (1usize << depth) - 1];
@@ -154,17 +176,51 @@ impl KdTree {
         if k == 0 || !query.iter().all(|c| c.is_finite()) {
             return;
         }
-        out.reserve(k);
+        if k <= STACK_K {
+            let mut best = [SENTINEL; STACK_K];
+            self.knn_into(query, &mut best[..k]);
+            out.extend(best[..k].iter().map(|&b| unkey(b)));
+        } else {
+            let mut best = vec![SENTINEL; k];
+            self.knn_into(query, &mut best);
+            out.extend(best.iter().map(|&b| unkey(b)));
+        }
+    }
+
+    /// Fills `best` (its length is k, `1 <= k <= num_indexed()`, finite query) with the keys of
+    /// the k nearest, sorted.
+    #[inline]
+    fn knn_into(&self, query: [f32; 3], best: &mut [u64]) {
+        best.fill(SENTINEL);
         let mut off = [0.0f32; 3];
-        self.knn_rec(0, 0, 0, &query, &mut off, k, out);
+        self.knn_rec(0, 0, 0, &query, &mut off, best);
+    }
+
+    /// The leaf whose range `query` descends to (the first one a search scans).
+    fn leaf_of(&self, q: [f32; 3]) -> usize {
+        let (mut node, mut leaf) = (0usize, 0usize);
+        for level in 0..self.depth {
+            let nd = self.nodes[node];
+            let half = 1usize << (self.depth - level - 1);
+            if q[nd.dim as usize] < nd.val {
+                node += 1;
+            } else {
+                node += half;
+                leaf += half;
+            }
+        }
+        leaf
     }
 
     /// The nearest point to `query` (smallest index among equally near ones), or `None` for an
     /// empty tree or a non-finite query.
     pub fn nearest(&self, query: [f32; 3]) -> Option<Neighbor> {
-        let mut out = Vec::with_capacity(1);
-        self.knn(query, 1, &mut out);
-        out.first().copied()
+        if self.idx.is_empty() || !query.iter().all(|c| c.is_finite()) {
+            return None;
+        }
+        let mut best = [SENTINEL];
+        self.knn_into(query, &mut best);
+        Some(unkey(best[0]))
     }
 
     /// All points with `dist_sq <= radius_sq`, into `out` (cleared first), sorted by
@@ -189,28 +245,65 @@ impl KdTree {
     pub fn knn_batch(&self, queries: &[[f32; 3]], k: usize) -> KnnTable {
         let k = k.min(self.idx.len());
         let nq = queries.len();
-        let mut indices = vec![NO_NEIGHBOR; nq * k];
-        let mut dists = vec![f32::INFINITY; nq * k];
-        if k > 0 {
-            let mut blocks: Vec<KnnBlock> = queries
-                .chunks(QUERY_BLOCK)
-                .zip(indices.chunks_mut(QUERY_BLOCK * k).zip(dists.chunks_mut(QUERY_BLOCK * k)))
-                .map(|(q, (i, d))| (q, i, d))
-                .collect();
-            par::for_each_chunk_mut(&mut blocks, 1, |_, chunk| {
-                let mut buf = Vec::with_capacity(k);
-                for (qs, ii, dd) in chunk.iter_mut() {
-                    for (qi, q) in qs.iter().enumerate() {
-                        self.knn(*q, k, &mut buf);
-                        for (j, nb) in buf.iter().enumerate() {
-                            ii[qi * k + j] = nb.index;
-                            dd[qi * k + j] = nb.dist_sq;
-                        }
-                    }
-                }
-            });
+        if k == 0 {
+            return KnnTable { k, n_queries: nq, indices: Vec::new(), dist_sq: Vec::new() };
         }
+        // Queries are answered in the order of the leaves they fall in, so that consecutive
+        // searches touch the same nodes and points (cache locality), then rows are put back.
+        let order = self.leaf_order(queries);
+        let mut sorted = vec![0u64; nq * k];
+        par::for_each_chunk_mut(&mut sorted, QUERY_BLOCK * k, |b, rows| {
+            for (r, best) in rows.chunks_exact_mut(k).enumerate() {
+                let q = queries[order[b * QUERY_BLOCK + r] as usize];
+                if q.iter().all(|c| c.is_finite()) {
+                    self.knn_into(q, best);
+                } else {
+                    best.fill(key(f32::INFINITY, NO_NEIGHBOR));
+                }
+            }
+        });
+        let mut rank = vec![0u32; nq];
+        for (r, &q) in order.iter().enumerate() {
+            rank[q as usize] = r as u32;
+        }
+        let mut indices = vec![0u32; nq * k];
+        let mut dists = vec![0.0f32; nq * k];
+        par::for_each_chunk_mut(&mut indices, QUERY_BLOCK * k, |b, rows| {
+            for (r, row) in rows.chunks_exact_mut(k).enumerate() {
+                let src = rank[b * QUERY_BLOCK + r] as usize * k;
+                for (o, nb) in row.iter_mut().zip(&sorted[src..src + k]) {
+                    *o = *nb as u32;
+                }
+            }
+        });
+        par::for_each_chunk_mut(&mut dists, QUERY_BLOCK * k, |b, rows| {
+            for (r, row) in rows.chunks_exact_mut(k).enumerate() {
+                let src = rank[b * QUERY_BLOCK + r] as usize * k;
+                for (o, nb) in row.iter_mut().zip(&sorted[src..src + k]) {
+                    *o = f32::from_bits((*nb >> 32) as u32);
+                }
+            }
+        });
         KnnTable { k, n_queries: nq, indices, dist_sq: dists }
+    }
+
+    /// Query indices sorted by the leaf each descends to (a stable counting sort).
+    fn leaf_order(&self, queries: &[[f32; 3]]) -> Vec<u32> {
+        let n_leaves = 1usize << self.depth;
+        let leaves: Vec<u32> = par::map(queries.len(), |i| self.leaf_of(queries[i]) as u32);
+        let mut start = vec![0u32; n_leaves + 1];
+        for &l in &leaves {
+            start[l as usize + 1] += 1;
+        }
+        for l in 0..n_leaves {
+            start[l + 1] += start[l];
+        }
+        let mut order = vec![0u32; queries.len()];
+        for (i, &l) in leaves.iter().enumerate() {
+            order[start[l as usize] as usize] = i as u32;
+            start[l as usize] += 1;
+        }
+        order
     }
 
     /// [`KdTree::within_radius`] for every query, in parallel with `parallel`, as a CSR table.
@@ -245,10 +338,11 @@ impl KdTree {
         RadiusTable { offsets, indices, dist_sq: dists }
     }
 
-    /// Depth-first kNN search. `off[d]` is the distance from the query to the node's box along
+    /// Depth-first kNN search into `best` (sorted, length k, padded with [`SENTINEL`]s, which
+    /// every real point beats). `off[d]` is the distance from the query to the node's box along
     /// axis `d`; `(off0² + off1²) + off2²` rounds no higher than [`dist_sq`] of any point in the
-    /// box (rounding is monotonic), so pruning when it exceeds the current k-th distance is exact.
-    #[allow(clippy::too_many_arguments)]
+    /// box (rounding is monotonic), so pruning when it exceeds the k-th distance is exact; ties
+    /// with the k-th distance are searched because a smaller index may win them.
     fn knn_rec(
         &self,
         node: usize,
@@ -256,11 +350,10 @@ impl KdTree {
         leaf: usize,
         q: &[f32; 3],
         off: &mut [f32; 3],
-        k: usize,
-        buf: &mut Vec<Neighbor>,
+        best: &mut [u64],
     ) {
         if level == self.depth {
-            self.scan_leaf_knn(leaf, q, k, buf);
+            self.scan_leaf_knn(leaf, q, best);
             return;
         }
         let nd = self.nodes[node];
@@ -272,39 +365,41 @@ impl KdTree {
         } else {
             (node + half, leaf + half, node + 1, leaf)
         };
-        self.knn_rec(near, level + 1, near_leaf, q, off, k, buf);
+        self.knn_rec(near, level + 1, near_leaf, q, off, best);
         let old = off[d];
         off[d] = diff.abs();
         let rd = off[0] * off[0] + off[1] * off[1] + off[2] * off[2];
-        let worst = if buf.len() < k { f32::INFINITY } else { buf[k - 1].dist_sq };
-        if rd <= worst {
-            self.knn_rec(far, level + 1, far_leaf, q, off, k, buf);
+        // `rd <= k-th distance`, in key space (a sentinel lets everything through).
+        if ((rd.to_bits() as u64) << 32) <= best[best.len() - 1] {
+            self.knn_rec(far, level + 1, far_leaf, q, off, best);
         }
         off[d] = old;
     }
 
     #[inline(always)]
-    fn scan_leaf_knn(&self, leaf: usize, q: &[f32; 3], k: usize, buf: &mut Vec<Neighbor>) {
+    fn scan_leaf_knn(&self, leaf: usize, q: &[f32; 3], best: &mut [u64]) {
         let (s, e) = (self.leaf_start[leaf] as usize, self.leaf_start[leaf + 1] as usize);
         let (xs, ys, zs, ids) = (&self.xs[s..e], &self.ys[s..e], &self.zs[s..e], &self.idx[s..e]);
-        let mut worst = if buf.len() < k { f32::INFINITY } else { buf[k - 1].dist_sq };
-        for j in 0..xs.len() {
-            let d = dist_sq(*q, [xs[j], ys[j], zs[j]]);
-            if d <= worst {
-                let cand = Neighbor { index: ids[j], dist_sq: d };
-                if buf.len() == k {
-                    if !cand.before(buf[k - 1]) {
-                        continue;
+        // Distances first, in a loop the compiler vectorises; the rare insertions after.
+        let mut ds = [0.0f32; BUCKET];
+        for (((d, &x), &y), &z) in ds.iter_mut().zip(xs).zip(ys).zip(zs) {
+            *d = dist_sq(*q, [x, y, z]);
+        }
+        let last = best.len() - 1;
+        let mut worst = best[last];
+        let mut worst_d = kth_dist(worst);
+        for (&d, &i) in ds.iter().zip(ids) {
+            if d <= worst_d {
+                let kk = key(d, i);
+                if kk < worst {
+                    let mut pos = last;
+                    while pos > 0 && kk < best[pos - 1] {
+                        best[pos] = best[pos - 1];
+                        pos -= 1;
                     }
-                    buf.pop();
-                }
-                let mut pos = buf.len();
-                while pos > 0 && cand.before(buf[pos - 1]) {
-                    pos -= 1;
-                }
-                buf.insert(pos, cand);
-                if buf.len() == k {
-                    worst = buf[k - 1].dist_sq;
+                    best[pos] = kk;
+                    worst = best[last];
+                    worst_d = kth_dist(worst);
                 }
             }
         }
@@ -361,7 +456,9 @@ fn build_rec(items: &mut [Item], nodes: &mut [Node], levels: u32) {
     }
     let mut lo = [f32::INFINITY; 3];
     let mut hi = [f32::NEG_INFINITY; 3];
-    for it in items.iter() {
+    // The extent only picks the split axis (any axis keeps the tree exact), so large ranges
+    // estimate it from an evenly strided sample of about `EXTENT_SAMPLE` points.
+    for it in items.iter().step_by((items.len() / EXTENT_SAMPLE).max(1)) {
         for a in 0..3 {
             lo[a] = lo[a].min(it.p[a]);
             hi[a] = hi[a].max(it.p[a]);
@@ -501,6 +598,19 @@ mod tests {
     fn cloud(n: usize, seed: u64) -> Vec<[f32; 3]> {
         let mut r = Rng::new(seed);
         (0..n).map(|_| [r.f32(), r.f32(), r.f32()]).collect()
+    }
+
+    #[test]
+    fn leaves_never_exceed_bucket() {
+        for n in (0..300).chain([1023, 1024, 1025, 4097, 4159, 100_001]) {
+            let t = KdTree::build(&vec![[1.0f32; 3]; n]);
+            assert_eq!(t.leaf_start.len(), (1 << t.depth) + 1);
+            assert!(
+                t.leaf_start.windows(2).all(|w| w[0] <= w[1] && (w[1] - w[0]) as usize <= BUCKET),
+                "n = {n}"
+            );
+            assert_eq!(*t.leaf_start.last().unwrap() as usize, n);
+        }
     }
 
     #[test]

@@ -8,6 +8,7 @@ mod cmd_eval;
 mod cmd_reconstruct;
 mod cmd_render;
 mod cmd_repair;
+mod cmd_synth;
 mod cmd_train;
 
 use std::process::ExitCode;
@@ -29,6 +30,7 @@ COMMANDS:
     train        --data DIR --out MODEL [--config default|paper] [--epochs N] [--resume CKPT]
     repair       MESH -o OUT.{obj,ply,off} post-process and hole-fill a quad mesh or face soup
     render       MESH -o OUT.svg           shaded SVG picture of a mesh
+    synth        -o CLOUD.xyz [--gt GT.obj] synthetic noisy cloud + ground-truth quad mesh
 ";
 
 fn main() -> ExitCode {
@@ -54,6 +56,7 @@ fn main() -> ExitCode {
         "train" => (cmd_train::HELP, cmd_train::run),
         "repair" => (cmd_repair::HELP, cmd_repair::run),
         "render" => (cmd_render::HELP, cmd_render::run),
+        "synth" => (cmd_synth::HELP, cmd_synth::run),
         other => {
             eprintln!("point2quad: unknown command {other:?}\n\n{USAGE}");
             return ExitCode::from(2);

@@ -1,0 +1,72 @@
+//! `point2quad repair` end to end: a soup made from a generated mesh (faces dropped, wrong
+//! and duplicated quads added, a triangle) is repaired into a valid mesh; errors are clear.
+
+#[path = "common/halfedge.rs"]
+mod common;
+
+use std::process::Command;
+
+use common::*;
+use point2quad::io::mesh_io::{read_mesh, write_mesh};
+use point2quad::mesh::halfedge::HalfedgeMesh;
+use point2quad::mesh::poly::PolyMesh;
+use point2quad::mesh::validate::validate;
+use point2quad::rng::Rng;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_point2quad"))
+}
+
+fn tmp(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("p2q_repair_{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d.join(name)
+}
+
+#[test]
+fn repair_turns_a_soup_into_a_valid_mesh() {
+    let m = from_shape("cube_sphere", point2quad::mesh::shapes::cube_sphere(4));
+    let mut rng = Rng::new(3);
+    let (faces, _) = random_soup(&m, &mut rng, 0.05, 30);
+    let mut poly =
+        PolyMesh { vertices: m.positions.clone(), faces: faces.iter().map(|f| f.to_vec()).collect() };
+    poly.faces.push(vec![0, 1, 2]);
+    let input = tmp("soup.obj");
+    write_mesh(&input, &poly).unwrap();
+    let out = tmp("out.ply");
+
+    let r = bin().args(["repair", input.to_str().unwrap(), "-o", out.to_str().unwrap()]).output().unwrap();
+    assert!(!r.status.success());
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(err.contains("has 3 vertices") && err.contains("--drop-non-quads"), "{err}");
+    assert!(!out.exists());
+
+    let r = bin()
+        .args(["repair", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--drop-non-quads"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{err}");
+    assert!(err.contains("inserted") && err.contains("hole filling"), "{err}");
+    let res = read_mesh(&out).unwrap();
+    assert_eq!(&res.vertices[..m.positions.len()], &m.positions[..]);
+    let q = res.to_quads().unwrap();
+    let h = HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).unwrap();
+    validate(&h).unwrap();
+    assert!(h.n_faces() > m.quads.len() / 2, "{err}");
+}
+
+#[test]
+fn repair_usage_errors() {
+    let r = bin().args(["repair", "--help"]).output().unwrap();
+    assert!(r.status.success());
+    assert!(String::from_utf8_lossy(&r.stdout).contains("--drop-non-quads"));
+    let r = bin().args(["repair", "x.obj"]).output().unwrap();
+    assert_eq!(r.status.code(), Some(2));
+    let r = bin().args(["repair", "x.obj", "-o", "y.obj", "--priority", "bogus"]).output().unwrap();
+    assert_eq!(r.status.code(), Some(2));
+    let r =
+        bin().args(["repair", "/nonexistent/x.obj", "-o", tmp("y.obj").to_str().unwrap()]).output().unwrap();
+    assert_eq!(r.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("/nonexistent/x.obj"));
+}

@@ -383,22 +383,22 @@ struct Conv {
     kernel: Arc<Vec<[f32; 3]>>,
 }
 
+/// A ResNet bottleneck block's layers.
+#[derive(Clone, Debug)]
+struct ResBlock {
+    unary1: Option<ConvBnAct>,
+    conv: Conv,
+    bn: BatchNorm1d,
+    unary2: ConvBnAct,
+    shortcut: Option<ConvBnAct>,
+    level: usize,
+    strided: bool,
+}
+
 #[derive(Clone, Debug)]
 enum Block {
-    Simple {
-        conv: Conv,
-        bn: BatchNorm1d,
-        level: usize,
-    },
-    Resnetb {
-        unary1: Option<ConvBnAct>,
-        conv: Conv,
-        bn: BatchNorm1d,
-        unary2: ConvBnAct,
-        shortcut: Option<ConvBnAct>,
-        level: usize,
-        strided: bool,
-    },
+    Simple { conv: Conv, bn: BatchNorm1d, level: usize },
+    Resnetb(Box<ResBlock>),
 }
 
 /// The network: parameter ids into a [`ParamStore`] plus fixed kernel points.
@@ -485,7 +485,7 @@ impl Kpfcnn {
                     } else {
                         None
                     };
-                    Block::Resnetb {
+                    Block::Resnetb(Box::new(ResBlock {
                         unary1,
                         conv,
                         bn,
@@ -493,7 +493,7 @@ impl Kpfcnn {
                         shortcut,
                         level: bp.level,
                         strided: kind == BlockKind::ResnetbStrided,
-                    }
+                    }))
                 }
             });
         }
@@ -514,7 +514,7 @@ impl Kpfcnn {
     fn convs(&self) -> impl Iterator<Item = (&Conv, usize, bool)> {
         self.blocks.iter().map(|b| match b {
             Block::Simple { conv, level, .. } => (conv, *level, false),
-            Block::Resnetb { conv, level, strided, .. } => (conv, *level, *strided),
+            Block::Resnetb(r) => (&r.conv, r.level, r.strided),
         })
     }
 
@@ -626,7 +626,8 @@ impl Kpfcnn {
                     g.free(y);
                     z
                 }
-                Block::Resnetb { unary1, conv, bn, unary2, shortcut, level, strided } => {
+                Block::Resnetb(r) => {
+                    let ResBlock { unary1, conv, bn, unary2, shortcut, level, strided } = r.as_ref();
                     if *strided {
                         skips.push(x);
                     }

@@ -58,6 +58,7 @@ test-heavy:
 bench:
 	$(CARGO) bench --bench kdtree
 	$(CARGO) bench --bench face_net
+	$(CARGO) bench --bench kpfcnn
 
 coverage: build
 	$(BIN) coverage-report 2>/dev/null || $(CARGO) test --release --test coverage -- --ignored --nocapture

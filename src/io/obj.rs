@@ -24,6 +24,7 @@ pub fn parse_obj(bytes: &[u8], name: &str) -> Result<PolyMesh> {
 
 /// As [`parse_obj`]; with `want_faces == false` the `f` lines are not read at all.
 pub(crate) fn parse_obj_with(bytes: &[u8], name: &str, want_faces: bool) -> Result<PolyMesh> {
+    let bytes = &*text::cr_lines(bytes);
     let mut mesh = PolyMesh::default();
     // The largest positive (forward-resolvable) index seen and where, checked at the end.
     let mut max_index: (u64, usize) = (0, 0);
@@ -172,6 +173,16 @@ mod tests {
             let e = parse_obj(src, "t.obj").unwrap_err().to_string();
             assert!(e.contains(want), "got '{e}', want '{want}'");
         }
+    }
+
+    /// Regression: a file with classic Mac line endings (CR only) read as one line,
+    /// so only its first vertex loaded and its faces were silently dropped.
+    #[test]
+    fn cr_only_line_endings_keep_every_line() {
+        let m = parse_obj(b"v 0 0 0\rv 1 0 0\rv 1 1 0\rv 0 1 0\rf 1 2 3 4\r", "t.obj").unwrap();
+        assert_eq!((m.vertices.len(), m.faces.clone()), (4, vec![vec![0, 1, 2, 3]]));
+        let e = parse_obj(b"v 0 0 0\rv 1 x 0\r", "t.obj").unwrap_err().to_string();
+        assert!(e.contains("t.obj:2: vertex 1: bad number 'x'"), "{e}");
     }
 
     #[test]

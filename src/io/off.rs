@@ -26,6 +26,7 @@ pub fn parse_off(bytes: &[u8], name: &str) -> Result<PolyMesh> {
 
 /// As [`parse_off`]; with `want_faces == false` reading stops after the vertices.
 pub(crate) fn parse_off_with(bytes: &[u8], name: &str, want_faces: bool) -> Result<PolyMesh> {
+    let bytes = &*text::cr_lines(bytes);
     // Lines holding data (not blank, not only a comment).
     let mut lines = Lines::new(bytes).filter(|(_, l)| Tokens::commented(l).next().is_some());
     let (hl, header) = lines.next().ok_or_else(|| Error::parse(name, 0, "empty file (no OFF header)"))?;
@@ -270,6 +271,14 @@ mod tests {
             let e = parse_off(src.as_bytes(), "t.off").unwrap_err().to_string();
             assert!(e.contains(want), "got '{e}', want '{want}'");
         }
+    }
+
+    /// Regression: a CR-only file was one line and failed as "truncated" although
+    /// every vertex and face was there.
+    #[test]
+    fn cr_only_line_endings_read() {
+        let m = parse_off(b"OFF\r3 1 0\r0 0 0\r1 0 0\r0 1 0\r3 0 1 2\r", "t.off").unwrap();
+        assert_eq!((m.vertices.len(), m.faces.clone()), (3, vec![vec![0, 1, 2]]));
     }
 
     #[test]

@@ -349,6 +349,9 @@ pub(crate) fn parse_ply_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
                 unchecked_faces = nv.is_none();
                 read_faces(el, &mut cur, body.len(), name, nv, &mut mesh.faces)?;
             }
+            // An element without properties occupies no bytes, whatever its count
+            // claims: looping over a lying count of 10^18 would never end.
+            _ if el.props.is_empty() => {}
             _ => {
                 for i in 0..el.count {
                     let what = format_args!("{} {i} of {} declared", el.name, el.count);
@@ -735,6 +738,28 @@ mod tests {
         for (src, want) in &cases {
             let e = parse_ply(src.as_bytes(), "t.ply").unwrap_err().to_string();
             assert!(e.contains(want), "got '{e}', want '{want}'");
+        }
+    }
+
+    /// Regression: an element with no properties and a count of 10^18 made the
+    /// reader loop 10^18 times over nothing (a hang on a 200-byte file).
+    #[test]
+    fn propertyless_element_with_huge_count_does_not_hang() {
+        for fmt in ["ascii", "binary_little_endian"] {
+            let mut b = format!(
+                "ply\nformat {fmt} 1.0\nelement junk 1000000000000000000\nelement vertex 1\n\
+                 property float x\nproperty float y\nproperty float z\nend_header\n"
+            )
+            .into_bytes();
+            if fmt == "ascii" {
+                b.extend_from_slice(b"1 2 3\n");
+            } else {
+                for c in [1.0f32, 2.0, 3.0] {
+                    b.extend_from_slice(&c.to_le_bytes());
+                }
+            }
+            let m = parse_ply(&b, "t.ply").unwrap_or_else(|e| panic!("{fmt}: {e}"));
+            assert_eq!(m.vertices, vec![[1.0, 2.0, 3.0]], "{fmt}");
         }
     }
 

@@ -80,6 +80,7 @@ pub fn parse_points(bytes: &[u8], format: PointFormat, name: &str) -> Result<Vec
 }
 
 fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
+    let bytes = &*text::cr_lines(bytes);
     let mut points = Vec::with_capacity(bytes.len() / 24);
     let mut declared: Option<(usize, usize)> = None;
     let mut first = true;
@@ -186,6 +187,14 @@ mod tests {
         let p = parse_points(src, PointFormat::Xyz, "t.xyz").unwrap();
         assert_eq!(p, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0], [-0.0, 1e-3, 0.5]]);
         assert!(p[3][0].is_sign_negative());
+    }
+
+    /// Regression: a CR-only .xyz file read as one line with extra columns: one point
+    /// instead of all of them, silently.
+    #[test]
+    fn cr_only_line_endings_keep_every_point() {
+        let p = parse_points(b"0 0 0\r1 0 0\r1 1 0\r", PointFormat::Xyz, "t.xyz").unwrap();
+        assert_eq!(p, vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]]);
     }
 
     #[test]

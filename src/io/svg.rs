@@ -141,8 +141,25 @@ pub fn render_svg(mesh: &PolyMesh, opts: &RenderOptions) -> String {
             used[v as usize] = true;
         }
     }
-    let proj: Vec<[f64; 3]> =
-        mesh.vertices.iter().map(|&p| [dot(p, view.right), dot(p, view.up), dot(p, view.toward)]).collect();
+    // The picture does not depend on the mesh's scale (it is fitted below), so work on
+    // coordinates divided by the largest one drawn: a finite mesh at 1e300 would
+    // otherwise overflow in the projection and the normals and print NaN sizes.
+    let size = mesh
+        .vertices
+        .iter()
+        .zip(&used)
+        .filter(|(_, u)| **u)
+        .flat_map(|(p, _)| p.iter())
+        .fold(0.0f64, |m, c| m.max(c.abs()));
+    let unit = |p: [f64; 3]| if size > 0.0 { p.map(|c| c / size) } else { p };
+    let proj: Vec<[f64; 3]> = mesh
+        .vertices
+        .iter()
+        .map(|&p| {
+            let p = unit(p);
+            [dot(p, view.right), dot(p, view.up), dot(p, view.toward)]
+        })
+        .collect();
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
     for (p, _) in proj.iter().zip(&used).filter(|(_, u)| **u) {
         for k in 0..2 {
@@ -203,7 +220,7 @@ pub fn render_svg(mesh: &PolyMesh, opts: &RenderOptions) -> String {
     let mut pts: Vec<[f64; 3]> = Vec::new();
     for &(_, f) in &order {
         pts.clear();
-        pts.extend(mesh.faces[f].iter().map(|&v| mesh.vertices[v as usize]));
+        pts.extend(mesh.faces[f].iter().map(|&v| unit(mesh.vertices[v as usize])));
         let fill = match newell(&pts) {
             Some(n) if dot(n, view.toward) >= 0.0 => rgb(FRONT_RGB, 0.35 + 0.65 * dot(n, light).max(0.0)),
             Some(n) => rgb(BACK_RGB, 0.25 + 0.35 * (-dot(n, light)).max(0.0)),
@@ -312,6 +329,30 @@ mod tests {
         let fills: Vec<&str> = svg.split("fill=\"").skip(2).map(|s| &s[..7]).take(2).collect();
         assert_eq!(fills.len(), 2);
         assert_ne!(fills[0], fills[1]);
+    }
+
+    /// Regression: a finite mesh with 1e308 coordinates overflowed in the projection
+    /// and wrote `height="NaN"` and NaN polygon points.
+    #[test]
+    fn huge_and_tiny_coordinates_render_without_nan() {
+        for k in [1e308, 1e200, 1e-200, 5e-324] {
+            let mut m = square_pair();
+            for p in &mut m.vertices {
+                *p = p.map(|c| (c - 0.5) * k);
+            }
+            let svg = render_svg(&m, &RenderOptions::default());
+            assert!(!svg.contains("NaN") && !svg.contains("inf"), "{k}: {svg}");
+            assert_eq!(svg.matches("<polygon").count(), 2, "{k}");
+        }
+        // Stretched to 1e300 along x and moved off the origin: still drawn, no NaN.
+        let near = render_svg(&square_pair(), &RenderOptions::default());
+        let mut far = square_pair();
+        for p in &mut far.vertices {
+            p[0] = p[0] * 1e300 + 1e300;
+        }
+        let svg = render_svg(&far, &RenderOptions::default());
+        assert!(!svg.contains("NaN") && !svg.contains("inf"), "{svg}");
+        assert_eq!(svg.matches("<polygon").count(), near.matches("<polygon").count());
     }
 
     #[test]

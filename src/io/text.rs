@@ -44,6 +44,19 @@ impl<'a> Iterator for Lines<'a> {
     }
 }
 
+/// The text with classic Mac line endings (a lone `\r`) turned into `\n`, when it
+/// has no `\n` at all; otherwise the text as is. Without this a CR-only file reads
+/// as one long line, and the formats that ignore extra columns (OBJ, .xyz) would
+/// silently keep its first vertex only. Only for text formats: never for a file
+/// that may hold binary data.
+pub(crate) fn cr_lines(bytes: &[u8]) -> std::borrow::Cow<'_, [u8]> {
+    if find_byte(bytes, b'\n').is_none() && find_byte(bytes, b'\r').is_some() {
+        std::borrow::Cow::Owned(bytes.iter().map(|&b| if b == b'\r' { b'\n' } else { b }).collect())
+    } else {
+        std::borrow::Cow::Borrowed(bytes)
+    }
+}
+
 /// Position of the first `needle` in `hay`. Eight bytes at a time (the classic
 /// "has zero byte" word trick): lines are short, but a 1 MB file has 25k of them,
 /// and a byte-at-a-time loop was a fifth of the parse time.
@@ -158,10 +171,19 @@ pub(crate) fn parse_i64(tok: &[u8]) -> Option<i64> {
     Some(if neg { -v } else { v })
 }
 
-/// A token for an error message: lossy UTF-8, cut to a readable length.
+/// A token for an error message: lossy UTF-8, control characters escaped (a binary
+/// file must not send terminal escape sequences to the user's stderr), cut to a
+/// readable length.
 pub(crate) fn show(tok: &[u8]) -> String {
     const MAX: usize = 40;
-    let s = String::from_utf8_lossy(&tok[..tok.len().min(MAX)]).into_owned();
+    let mut s = String::new();
+    for c in String::from_utf8_lossy(&tok[..tok.len().min(MAX)]).chars() {
+        if c.is_control() {
+            s.extend(c.escape_default());
+        } else {
+            s.push(c);
+        }
+    }
     if tok.len() > MAX {
         format!("{s}…")
     } else {
@@ -208,6 +230,13 @@ mod tests {
         assert_eq!(v, vec![(1, &b"a"[..]), (2, &b"b"[..]), (3, &b""[..]), (4, &b"c"[..])]);
         assert_eq!(Lines::new(b"a\n").count(), 1);
         assert_eq!(Lines::new(b"").count(), 0);
+    }
+
+    #[test]
+    fn cr_only_text_becomes_lines() {
+        assert_eq!(&*cr_lines(b"a\rb\r"), b"a\nb\n");
+        assert_eq!(&*cr_lines(b"a\r\nb\r"), b"a\r\nb\r");
+        assert!(matches!(cr_lines(b"a b"), std::borrow::Cow::Borrowed(_)));
     }
 
     #[test]
@@ -270,6 +299,16 @@ mod tests {
             assert_eq!(back.to_bits(), x.to_bits(), "{x} -> {}", String::from_utf8_lossy(&buf));
             assert!(buf.len() < 26, "{}", String::from_utf8_lossy(&buf));
         }
+    }
+
+    /// Regression: garbage bytes were echoed raw into error messages, so a binary
+    /// file could send terminal escape sequences (ESC, BEL, CR) to stderr.
+    #[test]
+    fn show_escapes_control_bytes_from_garbage() {
+        let s = show(b"a\x1b[2Jb\x07\r\x00\xff");
+        assert!(!s.chars().any(char::is_control), "{s:?}");
+        assert!(s.starts_with("a\\u{1b}[2Jb"), "{s:?}");
+        assert_eq!(show(b"plain"), "plain");
     }
 
     #[test]

@@ -234,6 +234,16 @@ pub fn quad_shape(p: &[[f64; 3]; 4]) -> QuadShape {
     if p.iter().flatten().any(|c| !c.is_finite()) {
         return DEGENERATE;
     }
+    // Every measure is invariant under translation and uniform scale, so work on the
+    // quad moved to p0 and scaled to unit size: a huge (1e200) or tiny (1e-200) but
+    // finite quad would otherwise overflow or underflow in the squared lengths and be
+    // called degenerate. Halving first keeps the differences themselves finite.
+    let half: [[f64; 3]; 4] = std::array::from_fn(|i| std::array::from_fn(|k| 0.5 * p[i][k] - 0.5 * p[0][k]));
+    let size = half.iter().flatten().fold(0.0f64, |m, c| m.max(c.abs()));
+    if size == 0.0 {
+        return DEGENERATE;
+    }
+    let p: [[f64; 3]; 4] = half.map(|q| q.map(|c| c / size));
     let e: [[f64; 3]; 4] = std::array::from_fn(|i| sub(p[(i + 1) % 4], p[i]));
     let len: [f64; 4] = std::array::from_fn(|i| norm(e[i]));
     if len.iter().any(|&l| !(l > 0.0 && l.is_finite())) {
@@ -327,6 +337,16 @@ pub fn mesh_metrics(mesh: &PolyMesh) -> MeshMetrics {
         angle_dev_deg: mean(dev_sum, 4 * shaped),
         angle_rms_deg: mean(dev_sq_sum, 4 * shaped).sqrt(),
     }
+}
+
+/// |v| without overflow or underflow in the squares (v scaled by its largest
+/// component first): the bounding box of a 1e200-sized mesh has a finite diagonal.
+fn scaled_norm(v: [f64; 3]) -> f64 {
+    let m = v.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+    if m == 0.0 || !m.is_finite() {
+        return m;
+    }
+    m * norm(v.map(|c| c / m))
 }
 
 /// Axis-aligned bounds of the finite vertices that faces use; `None` if there are none.
@@ -432,7 +452,8 @@ fn mean_nearest(from: &[[f64; 3]], to: &[[f64; 3]]) -> f64 {
 /// floor, not 0), and face precision/recall with vertices matched within
 /// [`MATCH_TOLERANCE`] × the ground truth's bounding-box diagonal. A predicted face
 /// counts when its vertices match distinct ground-truth vertices that are exactly the
-/// vertex set of a ground-truth face; a ground-truth face counts as recalled when
+/// vertex set of a ground-truth face (ground-truth vertices at one position, within the
+/// tolerance, count as one vertex: split seams do not hide faces); a ground-truth face counts as recalled when
 /// some counted predicted face has its vertex set.
 ///
 /// # Errors
@@ -443,46 +464,73 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
         return Err(Error::invalid("ground-truth mesh has no faces"));
     }
     let (lo, hi) = face_bounds(gt).ok_or_else(|| Error::invalid("ground-truth mesh has no finite vertex"))?;
-    let diag = norm(sub(hi, lo));
+    let diag = scaled_norm(std::array::from_fn(|k| 0.5 * hi[k] - 0.5 * lo[k])) * 2.0;
     if !(diag > 0.0 && diag.is_finite()) {
-        return Err(Error::invalid("ground-truth mesh has a zero (or non-finite) bounding-box diagonal"));
+        return Err(Error::invalid(format!(
+            "ground-truth mesh has a zero (or non-finite) bounding-box diagonal: bounds {lo:?} to {hi:?}"
+        )));
     }
-    let centre: [f64; 3] = std::array::from_fn(|k| 0.5 * (lo[k] + hi[k]));
+    // Halves first: lo + hi overflows for far-away (1e308) meshes.
+    let centre: [f64; 3] = std::array::from_fn(|k| 0.5 * lo[k] + 0.5 * hi[k]);
     // Everything below works in the ground truth's unit-diagonal frame, centred, so
     // that f32 kd-tree coordinates keep ~1e-7 relative precision. Coordinates are
     // clamped to ±1e30 diagonals so that an absurdly far (finite) prediction still
     // gives a finite distance and a finite f32 point.
+    // A non-finite vertex stays non-finite (the sampler and the kd-tree skip it)
+    // rather than being clamped into a finite point that could match.
     let frame = |p: [f64; 3]| -> [f64; 3] {
+        if !p.iter().all(|c| c.is_finite()) {
+            return p;
+        }
         std::array::from_fn(|k| ((p[k] - centre[k]) / diag).clamp(-FAR_CLAMP, FAR_CLAMP))
     };
+    // Sampling happens in the frame too (area weights are invariant under the uniform
+    // scale): a 1e200-sized mesh has triangle areas that overflow in world units.
+    let in_frame = |m: &PolyMesh| PolyMesh {
+        vertices: m.vertices.iter().map(|&p| frame(p)).collect(),
+        faces: m.faces.clone(),
+    };
+    let (pred_f, gt_f) = (in_frame(pred), in_frame(gt));
 
     let mut rng = Rng::new(seed);
     let (mut rng_pred, mut rng_gt) = (rng.fork(1), rng.fork(2));
-    let sp = sample_surface(pred, CHAMFER_SAMPLES, &mut rng_pred)
+    let sp = sample_surface(&pred_f, CHAMFER_SAMPLES, &mut rng_pred)
         .ok_or_else(|| Error::invalid("predicted mesh has no finite face vertex to sample"))?;
-    let sg = sample_surface(gt, CHAMFER_SAMPLES, &mut rng_gt)
+    let sg = sample_surface(&gt_f, CHAMFER_SAMPLES, &mut rng_gt)
         .ok_or_else(|| Error::invalid("ground-truth mesh has no finite face vertex to sample"))?;
-    let sp: Vec<[f64; 3]> = sp.into_iter().map(frame).collect();
-    let sg: Vec<[f64; 3]> = sg.into_iter().map(frame).collect();
     let (p2g, g2p) = crate::par::join(|| mean_nearest(&sp, &sg), || mean_nearest(&sg, &sp));
 
     // Vertex matching: nearest ground-truth vertex, accepted within the tolerance
     // (checked in f64).
-    let gt_pts: Vec<[f64; 3]> = gt.vertices.iter().map(|&p| frame(p)).collect();
+    let gt_pts = &gt_f.vertices;
     // The kd-tree leaves out non-finite points and reports input indices.
     let gt32: Vec<[f32; 3]> = gt_pts.iter().map(|&p| crate::math::to_f32(p)).collect();
     let tree = KdTree::build(&gt32);
     let tol_sq = MATCH_TOLERANCE * MATCH_TOLERANCE;
-    let matched: Vec<Option<u32>> = crate::par::map(pred.vertices.len(), |i| {
-        let p = frame(pred.vertices[i]);
+    // Ground-truth vertices at one position (within the tolerance) are one vertex for
+    // the face match: meshes exported with split seams repeat positions, and a face
+    // of the prediction cannot say which copy it meant. Each maps to the smallest
+    // index at its position (the f32 search is wide; f64 decides).
+    let search_sq = (4.0 * tol_sq) as f32;
+    let canon: Vec<u32> = crate::par::map(gt_pts.len(), |i| {
+        let mut near = Vec::new();
+        tree.within_radius(crate::math::to_f32(gt_pts[i]), search_sq, &mut near);
+        near.iter()
+            .map(|n| n.index)
+            .filter(|&j| crate::math::dist_sq(gt_pts[i], gt_pts[j as usize]) <= tol_sq)
+            .min()
+            .map_or(i as u32, |j| j.min(i as u32))
+    });
+    let matched: Vec<Option<u32>> = crate::par::map(pred_f.vertices.len(), |i| {
+        let p = pred_f.vertices[i];
         let nb = tree.nearest(crate::math::to_f32(p))?;
-        (crate::math::dist_sq(p, gt_pts[nb.index as usize]) <= tol_sq).then_some(nb.index)
+        (crate::math::dist_sq(p, gt_pts[nb.index as usize]) <= tol_sq).then(|| canon[nb.index as usize])
     });
     let matched_vertices = matched.iter().filter(|m| m.is_some()).count();
 
     let mut gt_faces: HashMap<Vec<u32>, Vec<usize>> = HashMap::with_capacity(gt.faces.len());
     for (i, f) in gt.faces.iter().enumerate() {
-        let mut key = f.clone();
+        let mut key: Vec<u32> = f.iter().map(|&v| canon.get(v as usize).copied().unwrap_or(v)).collect();
         key.sort_unstable();
         gt_faces.entry(key).or_default().push(i);
     }
@@ -685,6 +733,37 @@ mod tests {
         let m = mesh_metrics(&PolyMesh { vertices, faces });
         assert_eq!((m.nonmanifold_edges, m.edges, m.boundary_edges, m.nonmanifold_vertices), (1, 10, 9, 0));
         assert!(close(m.manifoldness, 0.9) && close(m.watertightness, 0.0));
+    }
+
+    /// Regression: a mesh with a split seam (two vertices at one position, one per
+    /// side) scored precision and recall 0.5 against itself: the prediction's copy
+    /// was matched to the other copy, so the second face's vertex set did not match.
+    #[test]
+    fn duplicate_ground_truth_vertices_do_not_hide_faces() {
+        let m = PolyMesh {
+            vertices: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [2.0, 0.0, 0.0],
+                [2.0, 1.0, 0.0],
+                [1.0, 1.0, 0.0],
+            ],
+            faces: vec![vec![0, 1, 2, 3], vec![4, 5, 6, 7]],
+        };
+        let r = compare(&m, &m, 0).unwrap();
+        assert_eq!((r.precision, r.recall, r.matched_vertices), (1.0, 1.0, 8));
+        // Welded prediction against the split ground truth: the same faces.
+        let mut welded = m.clone();
+        welded.vertices.truncate(6);
+        welded.vertices.push([2.0, 1.0, 0.0]);
+        welded.faces[1] = vec![1, 4, 6, 2];
+        welded.vertices[4] = [2.0, 0.0, 0.0];
+        welded.vertices[5] = [9.0, 9.0, 9.0];
+        let r = compare(&welded, &m, 0).unwrap();
+        assert_eq!((r.precision, r.recall), (1.0, 1.0));
     }
 
     #[test]

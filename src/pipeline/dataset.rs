@@ -354,7 +354,11 @@ pub fn read_sample(bytes: &[u8], source: &str) -> Result<Sample> {
     };
     let name =
         std::str::from_utf8(take(l)).map_err(|e| err(format!("sample name is not UTF-8: {e}")))?.to_string();
-    take(name_padding(l));
+    // The writer pads with zeros; anything else is a file it did not write (and
+    // would not encode back to the same bytes).
+    if take(name_padding(l)).iter().any(|&b| b != 0) {
+        return Err(err("non-zero padding after the sample name: corrupted file".into()));
+    }
     let flat: Vec<f32> = get_le(take(n * 12), f32::from_le_bytes);
     let points: Vec<[f32; 3]> = flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
     let quads = |b: &[u8]| -> Vec<[u32; 4]> {
@@ -552,6 +556,21 @@ mod tests {
         bytes[end..].copy_from_slice(&h.0.to_le_bytes());
         let e = read_sample(&bytes, "forged.p2qs").unwrap_err().to_string();
         assert!(e.contains("forged.p2qs") && e.contains("candidate 0"), "{e}");
+    }
+
+    /// Regression: garbage in the name padding (checksum recomputed) was accepted, so
+    /// a file read back as a sample that encodes to different bytes.
+    #[test]
+    fn nonzero_name_padding_is_caught() {
+        let s = Sample { name: "ab".into(), points: vec![[0.0; 3]], ..Default::default() };
+        let mut bytes = encode_sample(&s).unwrap();
+        bytes[HEADER_LEN + 2] = 7;
+        let end = bytes.len() - 8;
+        let mut h = Fnv::new();
+        h.update(&bytes[..end]);
+        bytes[end..].copy_from_slice(&h.0.to_le_bytes());
+        let e = read_sample(&bytes, "pad.p2qs").unwrap_err().to_string();
+        assert!(e.contains("pad.p2qs") && e.contains("padding"), "{e}");
     }
 
     #[test]

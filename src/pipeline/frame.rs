@@ -52,7 +52,7 @@ impl Frame {
         let scale = r2.sqrt();
         // An extent at the level of f64 rounding of the coordinates is no extent: the
         // local coordinates would be pure rounding noise.
-        if !(scale > mag * 1e-12) || !scale.is_finite() || scale == 0.0 {
+        if !scale.is_finite() || scale <= mag * 1e-12 || scale == 0.0 {
             return Err(Error::invalid("degenerate point cloud: all points are identical"));
         }
         Ok(Frame { center, scale })
@@ -91,10 +91,12 @@ mod tests {
 
     #[test]
     fn fit_maps_into_unit_ball_and_round_trips() {
-        let pts = vec![[10.0, 0.0, 0.0], [12.0, 0.0, 0.0], [10.0, 3.0, 0.0], [10.0, 0.0, -5.0], [11.0, 1.0, 1.0]];
+        let pts =
+            vec![[10.0, 0.0, 0.0], [12.0, 0.0, 0.0], [10.0, 3.0, 0.0], [10.0, 0.0, -5.0], [11.0, 1.0, 1.0]];
         let f = Frame::fit(&pts).unwrap();
         let local = f.to_local_all(&pts);
-        let rmax = local.iter().map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()).fold(0.0f32, f32::max);
+        let rmax =
+            local.iter().map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()).fold(0.0f32, f32::max);
         assert!((rmax - 1.0).abs() < 1e-6);
         let mut c = [0.0f32; 3];
         for p in &local {

@@ -27,6 +27,11 @@ impl Default for NoiseConfig {
     }
 }
 
+/// Most noise points one call makes (10 million, 240 MB of positions): far beyond
+/// any cloud this tool handles; without a bound a large `fraction` made the
+/// allocation abort the process instead of returning an error.
+pub const MAX_NOISE_POINTS: usize = 10_000_000;
+
 /// One noise point with where it came from.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NoisePoint {
@@ -42,8 +47,10 @@ pub struct NoisePoint {
 /// `round(cfg.fraction × #vertices)` noise points on `mesh` (see the module header).
 ///
 /// # Errors
-/// `InvalidInput` when `fraction` or `offset` is negative or not finite, a face index is
-/// out of range, a vertex is not finite, or points are asked for on a mesh without area.
+/// `InvalidInput` when `fraction` or `offset` is negative or not finite, `fraction` asks
+/// for more than [`MAX_NOISE_POINTS`] points, a face index is out of range, a vertex is not finite,
+/// points are asked for on a mesh without area, or `offset` is so large that a point
+/// would not be finite.
 pub fn noise_points(mesh: &QuadMesh, cfg: &NoiseConfig, rng: &mut Rng) -> Result<Vec<[f64; 3]>> {
     Ok(noise_samples(mesh, cfg, rng)?.into_iter().map(|p| p.position).collect())
 }
@@ -69,7 +76,14 @@ pub fn noise_samples(mesh: &QuadMesh, cfg: &NoiseConfig, rng: &mut Rng) -> Resul
             return Err(Error::invalid(format!("face {fi} refers to vertex {v}, but the mesh has {nv}")));
         }
     }
-    let count = (cfg.fraction * nv as f64).round() as usize;
+    let wanted = (cfg.fraction * nv as f64).round();
+    if wanted > MAX_NOISE_POINTS as f64 {
+        return Err(Error::invalid(format!(
+            "noise fraction {} asks for {wanted} noise points on {nv} vertices; at most {MAX_NOISE_POINTS}",
+            cfg.fraction
+        )));
+    }
+    let count = wanted as usize;
     if count == 0 {
         return Ok(Vec::new());
     }
@@ -111,7 +125,15 @@ pub fn noise_samples(mesh: &QuadMesh, cfg: &NoiseConfig, rng: &mut Rng) -> Resul
             let n = cross(sub(b, a), sub(c, a));
             scale(n, 1.0 / norm(n))
         });
-        out.push(NoisePoint { position: add(on_surface, scale(n, d)), face: fi as u32, normal_offset: d });
+        let position = add(on_surface, scale(n, d));
+        if !position.iter().all(|c| c.is_finite()) {
+            return Err(Error::invalid(format!(
+                "noise offset {} is too large for this mesh: noise point {} is not finite",
+                cfg.offset,
+                out.len()
+            )));
+        }
+        out.push(NoisePoint { position, face: fi as u32, normal_offset: d });
     }
     Ok(out)
 }
@@ -158,6 +180,23 @@ mod tests {
         nan.vertices[3][1] = f64::NAN;
         assert!(noise_points(&nan, &cfg, &mut rng).is_err());
         assert!(noise_points(&QuadMesh::default(), &cfg, &mut rng).unwrap().is_empty());
+    }
+
+    /// Regression: `synth --noise 1e9` aborted the process on a 11.6 TB allocation, and
+    /// a huge offset gave infinite noise points; both are now errors.
+    #[test]
+    fn huge_fraction_and_offset_are_errors_not_aborts() {
+        let m = shapes::grid(4, 4, 1.0, 1.0);
+        let mut rng = Rng::new(0);
+        let e = noise_points(&m, &NoiseConfig { fraction: 1e9, offset: 0.1 }, &mut rng).unwrap_err();
+        assert!(e.to_string().contains("noise fraction"), "{e}");
+        let limit = MAX_NOISE_POINTS as f64 / 25.0;
+        let over = NoiseConfig { fraction: limit * 1.001, offset: 0.1 };
+        assert!(noise_points(&m, &over, &mut rng).is_err());
+        // Mean edge 250: offset × edge overflows for all but the tiniest draws.
+        let wide = shapes::grid(4, 4, 1000.0, 1000.0);
+        let e = noise_points(&wide, &NoiseConfig { fraction: 1.0, offset: f64::MAX }, &mut rng).unwrap_err();
+        assert!(e.to_string().contains("offset"), "{e}");
     }
 
     #[test]

@@ -17,11 +17,7 @@ use crate::spatial::kdtree::KnnTable;
 /// Number of neighbours per point stored in `knn` (robust to a table whose `k`
 /// field disagrees with its length).
 fn row_len(points: usize, knn: &KnnTable) -> usize {
-    if points == 0 {
-        0
-    } else {
-        knn.indices.len() / points
-    }
+    knn.indices.len().checked_div(points).unwrap_or(0)
 }
 
 /// Unit normal of each point by PCA of its row of `knn` (the row may include the
@@ -76,7 +72,7 @@ pub(crate) fn pca_normal(points: &[[f32; 3]], center: [f32; 3], row: &[u32]) -> 
         c[0][0], c[0][1], c[0][2], c[0][1], c[1][1], c[1][2], c[0][2], c[1][2], c[2][2],
     );
     let trace = c[0][0] + c[1][1] + c[2][2];
-    if !(trace > 0.0) || !trace.is_finite() {
+    if trace.is_nan() || trace <= 0.0 || !trace.is_finite() {
         return [0.0, 0.0, 1.0];
     }
     let eig = nalgebra::SymmetricEigen::new(m);
@@ -88,7 +84,7 @@ pub(crate) fn pca_normal(points: &[[f32; 3]], center: [f32; 3], row: &[u32]) -> 
     }
     let v = eig.eigenvectors.column(imin);
     let len = v.norm();
-    if !(len > 0.0) || !len.is_finite() {
+    if len.is_nan() || len <= 0.0 || !len.is_finite() {
         return [0.0, 0.0, 1.0];
     }
     [(v[0] / len) as f32, (v[1] / len) as f32, (v[2] / len) as f32]
@@ -149,7 +145,8 @@ fn symmetric_graph(n: usize, knn: &KnnTable) -> (Vec<usize>, Vec<u32>) {
 /// Lexicographic "greater" on coordinates, for tie-breaks that do not depend on
 /// point indices.
 fn coord_gt(a: [f32; 3], b: [f32; 3]) -> bool {
-    a.iter().zip(b.iter()).map(|(x, y)| x.total_cmp(y)).find(|o| o.is_ne()) == Some(std::cmp::Ordering::Greater)
+    a.iter().zip(b.iter()).map(|(x, y)| x.total_cmp(y)).find(|o| o.is_ne())
+        == Some(std::cmp::Ordering::Greater)
 }
 
 /// Flips normals so that neighbours agree in sign: Prim's minimum spanning tree on

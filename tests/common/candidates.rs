@@ -121,3 +121,30 @@ pub fn cyclic_canonical(q: [u32; 4]) -> [u32; 4] {
     let s = (0..4).min_by_key(|&i| q[i]).unwrap();
     [q[s], q[(s + 1) % 4], q[(s + 2) % 4], q[(s + 3) % 4]]
 }
+
+/// The quad meshes of `quads_dir()/sub` (sorted by name), or `None` when the data is absent.
+pub fn mesh_files(sub: &str) -> Option<Vec<std::path::PathBuf>> {
+    let dir = quads_dir()?.join(sub);
+    let mut v: Vec<_> = std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| matches!(p.extension().and_then(|e| e.to_str()), Some("obj" | "off" | "ply")))
+        .collect();
+    v.sort();
+    Some(v)
+}
+
+/// A shared mesh as a quad mesh.
+pub fn load_quad_mesh(path: &std::path::Path) -> point2quad::mesh::poly::QuadMesh {
+    let m = point2quad::io::mesh_io::read_mesh(path).expect("shared meshes load");
+    m.to_quads().expect("shared meshes are pure quad")
+}
+
+/// The mesh's vertices followed by 10% noise points (`NoiseConfig::default()`, seeded).
+pub fn noisy_cloud(mesh: &point2quad::mesh::poly::QuadMesh, seed: u64) -> Vec<[f64; 3]> {
+    use point2quad::pipeline::noise::{noise_points, NoiseConfig};
+    let mut rng = point2quad::rng::Rng::new(seed);
+    let mut pts = mesh.vertices.clone();
+    pts.extend(noise_points(mesh, &NoiseConfig::default(), &mut rng).expect("noise on a valid mesh"));
+    pts
+}

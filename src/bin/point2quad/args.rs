@@ -51,6 +51,13 @@ impl Args {
                             })?
                         }
                     };
+                    if v.is_empty() {
+                        // `-o=` or `-o ""`: an empty file name would only fail later,
+                        // with an error that cannot name the file.
+                        return Err(Error::Usage(format!(
+                            "{cmd}: option {name} needs a non-empty value (see `point2quad {cmd} --help`)"
+                        )));
+                    }
                     a.values.push((name, v));
                 } else if spec.switches.contains(&name.as_str()) && inline.is_none() {
                     a.switches.push(name);
@@ -122,5 +129,16 @@ mod tests {
         assert!(Args::parse("x", &v(&["--bogus"]), &spec).is_err());
         assert!(Args::parse("x", &v(&["-o"]), &spec).is_err());
         assert!(Args::parse("x", &v(&["--seed=abc"]), &spec).unwrap().parsed("x", "--seed", 0u64).is_err());
+    }
+
+    /// Regression: `-o=` gave an empty output name, and the write failed with
+    /// ": not a file path", naming nothing.
+    #[test]
+    fn empty_option_values_are_usage_errors() {
+        let spec = Spec { valued: &["-o"], switches: &[] };
+        for argv in [&["-o="][..], &["-o", ""][..]] {
+            let e = Args::parse("x", &v(argv), &spec).unwrap_err().to_string();
+            assert!(e.contains("-o needs a non-empty value"), "{e}");
+        }
     }
 }

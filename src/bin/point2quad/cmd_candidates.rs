@@ -22,7 +22,7 @@ OPTIONS:
                      estimated outward normal)
     --k K            neighbours searched per point (default 20; at least 3)
     --per-point P    candidates kept per proposing point before de-duplication
-                     (default 8; at least 1)
+                     (default 32; at least 1)
     -h, --help       this text
 
 A summary (points, candidates, candidates per point, time) goes to stderr.
@@ -40,7 +40,9 @@ pub fn run(argv: &[String]) -> Result<()> {
     let input = &args.expect_positional(CMD, 1, "one INPUT file")?[0];
     let output = match args.value("-o").or(args.value("--output")) {
         Some(o) => o.to_string(),
-        None => return Err(Error::Usage(format!("{CMD}: missing -o CAND.txt (see `point2quad {CMD} --help`)"))),
+        None => {
+            return Err(Error::Usage(format!("{CMD}: missing -o CAND.txt (see `point2quad {CMD} --help`)")))
+        }
     };
     let mut cfg = CandidateConfig::default();
     cfg.k = args.parsed(CMD, "--k", cfg.k)?;

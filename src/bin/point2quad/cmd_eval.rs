@@ -7,7 +7,7 @@ use std::path::Path;
 use crate::args::{Args, Spec};
 use point2quad::io::mesh_io::read_mesh;
 use point2quad::mesh::quality::{compare, mesh_metrics, GtMetrics, MeshMetrics};
-use point2quad::Result;
+use point2quad::{Error, Result};
 
 /// The text of `point2quad eval --help`.
 pub const HELP: &str = "\
@@ -41,13 +41,20 @@ pub fn run(argv: &[String]) -> Result<()> {
     let pred = read_mesh(Path::new(pred_path))?;
     let metrics = mesh_metrics(&pred);
     let gt = match args.value("--gt") {
-        Some(g) => Some(compare(&pred, &read_mesh(Path::new(g))?, seed)?),
+        Some(g) => {
+            let gt = read_mesh(Path::new(g))?;
+            // The library's message says "ground-truth" or "predicted"; name the files.
+            Some(compare(&pred, &gt, seed).map_err(|e| match e {
+                Error::InvalidInput(m) => Error::InvalidInput(format!("{pred_path} against {g}: {m}")),
+                other => other,
+            })?)
+        }
         None => None,
     };
     if args.switch("--json") {
-        println!("{}", to_json(&metrics, gt.as_ref()));
+        crate::output::stdout(&format!("{}\n", to_json(&metrics, gt.as_ref())))?;
     } else {
-        print!("{}", to_table(pred_path, &metrics, gt.as_ref()));
+        crate::output::stdout(&to_table(pred_path, &metrics, gt.as_ref()))?;
     }
     Ok(())
 }

@@ -37,6 +37,12 @@ pub fn run(argv: &[String]) -> Result<()> {
     let args = Args::parse("render", argv, &spec)?;
     let input = &args.expect_positional("render", 1, "one mesh MESH")?[0];
     let out = args.required("render", "-o")?;
+    let is_svg = Path::new(out).extension().is_some_and(|e| e.eq_ignore_ascii_case("svg"));
+    if !is_svg {
+        return Err(Error::Usage(format!(
+            "render: {out}: the picture is SVG; the output name must end in .svg (see `point2quad render --help`)"
+        )));
+    }
     let mut opts = RenderOptions::default();
     if let Some(v) = args.value("--view") {
         let parsed: Option<(f64, f64)> = v

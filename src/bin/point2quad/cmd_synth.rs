@@ -3,8 +3,8 @@
 //! written as ground truth. Used by `make demo` and handy for trying the tool.
 
 use crate::args::{Args, Spec};
-use point2quad::io::mesh_io::write_mesh;
-use point2quad::io::points::write_points_xyz;
+use point2quad::io::mesh_io::{read_mesh, write_mesh, MeshFormat};
+use point2quad::io::points::{write_points_xyz, PointFormat};
 use point2quad::mesh::poly::PolyMesh;
 use point2quad::mesh::shapes::{random_shape, random_shape_of, Family};
 use point2quad::pipeline::noise::{noise_points, NoiseConfig};
@@ -17,6 +17,7 @@ point2quad synth: a synthetic quad mesh as a noisy point cloud + its ground trut
 
 USAGE:
     point2quad synth -o CLOUD.xyz [--gt GT.{obj,ply,off}] [OPTIONS]
+    point2quad synth --from MESH -o CLOUD.xyz [--noise F] [--offset F] [--seed S]
 
 The cloud holds the mesh's vertices, then round(noise × #vertices) noise points, each
 on a random face (area-weighted) moved along its normal by up to offset × the face's
@@ -25,6 +26,7 @@ mean edge length.
 OPTIONS:
     -o CLOUD.xyz          output point cloud (required)
     --gt FILE             also write the ground-truth quad mesh
+    --from MESH           use this pure-quad mesh (.obj/.off/.ply) instead of a generated one
     --shape NAME          random, grid, height_field, cube, cube_sphere, torus, tube,
                           cylinder, cage_smooth, cage_sharp [random]
     --seed S              random seed [0]
@@ -33,19 +35,35 @@ OPTIONS:
 ";
 
 const SPEC: Spec =
-    Spec { valued: &["-o", "--gt", "--shape", "--seed", "--noise", "--offset"], switches: &[] };
+    Spec { valued: &["-o", "--from", "--gt", "--shape", "--seed", "--noise", "--offset"], switches: &[] };
 
 pub fn run(argv: &[String]) -> Result<()> {
     let cmd = "synth";
     let a = Args::parse(cmd, argv, &SPEC)?;
     a.expect_positional(cmd, 0, "no positional arguments")?;
     let out = a.required(cmd, "-o")?;
+    // Check every output name before writing anything, so that a bad --gt does not
+    // leave a cloud behind (and a .ply cloud is not written as .xyz text).
+    if PointFormat::from_path(Path::new(out))? != PointFormat::Xyz {
+        return Err(Error::Usage(format!(
+            "{cmd}: {out}: the cloud is written as text; use .xyz, .txt or .pts (see `point2quad {cmd} --help`)"
+        )));
+    }
+    if let Some(gt) = a.value("--gt") {
+        MeshFormat::from_path(Path::new(gt))?;
+    }
     let seed = a.parsed(cmd, "--seed", 0u64)?;
     let noise =
         NoiseConfig { fraction: a.parsed(cmd, "--noise", 0.1)?, offset: a.parsed(cmd, "--offset", 0.1)? };
     let mut rng = Rng::new(seed);
     let shape = a.value("--shape").unwrap_or("random");
-    let mesh = if shape == "random" {
+    let mesh = if let Some(from) = a.value("--from") {
+        if a.value("--shape").is_some() {
+            return Err(Error::Usage(format!("{cmd}: give --from or --shape, not both")));
+        }
+        let poly = read_mesh(Path::new(from))?;
+        poly.to_quads().map_err(|e| Error::invalid(format!("{from}: {e}")))?
+    } else if shape == "random" {
         random_shape(&mut rng)
     } else {
         let fam = Family::ALL.iter().copied().find(|f| f.name() == shape).ok_or_else(|| {
@@ -57,13 +75,18 @@ pub fn run(argv: &[String]) -> Result<()> {
     cloud.extend(noise_points(&mesh, &noise, &mut rng)?);
     write_points_xyz(Path::new(out), &cloud)?;
     if let Some(gt) = a.value("--gt") {
-        write_mesh(Path::new(gt), &PolyMesh::from(&mesh))?;
+        if let Err(e) = write_mesh(Path::new(gt), &PolyMesh::from(&mesh)) {
+            // Half a result is worse than none: the cloud without its ground truth goes.
+            let _ = std::fs::remove_file(out);
+            return Err(e);
+        }
     }
-    eprintln!(
-        "synth: {shape} (seed {seed}): {} vertices, {} quads, {} noise points -> {out}",
+    let shape = a.value("--from").unwrap_or(shape);
+    crate::output::stderr(&format!(
+        "synth: {shape} (seed {seed}): {} vertices, {} quads, {} noise points -> {out}\n",
         mesh.vertices.len(),
         mesh.quads.len(),
         cloud.len() - mesh.vertices.len()
-    );
+    ));
     Ok(())
 }

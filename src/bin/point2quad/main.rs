@@ -10,6 +10,7 @@ mod cmd_render;
 mod cmd_repair;
 mod cmd_synth;
 mod cmd_train;
+mod output;
 
 use std::process::ExitCode;
 
@@ -34,19 +35,34 @@ COMMANDS:
 ";
 
 fn main() -> ExitCode {
-    let argv: Vec<String> = std::env::args().skip(1).collect();
+    // `std::env::args` panics on an argument that is not valid Unicode (a file name
+    // with Latin-1 bytes, say); refuse it with a message instead.
+    let mut argv: Vec<String> = Vec::new();
+    for (i, a) in std::env::args_os().skip(1).enumerate() {
+        match a.into_string() {
+            Ok(s) => argv.push(s),
+            Err(raw) => {
+                output::stderr(&format!(
+                    "point2quad: argument {} ({}) is not valid UTF-8; rename the file or use another path to it\n",
+                    i + 1,
+                    raw.to_string_lossy()
+                ));
+                return ExitCode::from(2);
+            }
+        }
+    }
     let Some(cmd) = argv.first() else {
-        eprint!("{USAGE}");
+        output::stderr(USAGE);
         return ExitCode::from(2);
     };
     let rest = &argv[1..];
     let (help, run): (&str, RunFn) = match cmd.as_str() {
         "-h" | "--help" | "help" => {
-            print!("{USAGE}");
+            let _ = output::stdout(USAGE);
             return ExitCode::SUCCESS;
         }
         "-V" | "--version" => {
-            println!("point2quad {}", env!("CARGO_PKG_VERSION"));
+            let _ = output::stdout(&format!("point2quad {}\n", env!("CARGO_PKG_VERSION")));
             return ExitCode::SUCCESS;
         }
         "reconstruct" => (cmd_reconstruct::HELP, cmd_reconstruct::run),
@@ -58,18 +74,18 @@ fn main() -> ExitCode {
         "render" => (cmd_render::HELP, cmd_render::run),
         "synth" => (cmd_synth::HELP, cmd_synth::run),
         other => {
-            eprintln!("point2quad: unknown command {other:?}\n\n{USAGE}");
+            output::stderr(&format!("point2quad: unknown command {other:?}\n\n{USAGE}\n"));
             return ExitCode::from(2);
         }
     };
     if rest.iter().any(|a| a == "-h" || a == "--help") {
-        print!("{help}");
+        let _ = output::stdout(help);
         return ExitCode::SUCCESS;
     }
     match run(rest) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("point2quad {cmd}: error: {e}");
+            output::stderr(&format!("point2quad {cmd}: error: {e}\n"));
             match e {
                 point2quad::Error::Usage(_) => ExitCode::from(2),
                 _ => ExitCode::from(1),

@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# Quality on a folder of ground-truth quad meshes (DESIGN §7): for each mesh, sample a
+# cloud (its vertices + NOISE × #vertices noise points, seed 1), reconstruct, and
+# compare with the ground truth. Prints one markdown row per mesh and the means.
+#   scripts/quality_table.sh BIN MESH_DIR [NOISE] [MODEL] [OUTDIR]
+# Example: scripts/quality_table.sh target/release/point2quad ../shared/data/quads/eval 0.1
+set -euo pipefail
+BIN=$1; DIR=$2; NOISE=${3:-0.1}; MODEL=${4:-}; OUT=${5:-out/quality}
+mkdir -p "$OUT"
+JSONL="$OUT/metrics_noise${NOISE}.jsonl"; : > "$JSONL"
+for f in "$DIR"/*.obj "$DIR"/*.off "$DIR"/*.ply; do
+  [ -e "$f" ] || continue
+  name=$(basename "${f%.*}")
+  "$BIN" synth --from "$f" --noise "$NOISE" --seed 1 -o "$OUT/$name.xyz" 2>/dev/null
+  t0=$(date +%s.%N)
+  if "$BIN" reconstruct "$OUT/$name.xyz" -o "$OUT/$name.obj" ${MODEL:+--model "$MODEL"} \
+       --svg "$OUT/$name.svg" 2> "$OUT/$name.log"; then
+    t1=$(date +%s.%N)
+    json=$("$BIN" eval "$OUT/$name.obj" --gt "$f" --json)
+    gt=$("$BIN" eval "$f" --json)
+    echo "{\"name\": \"$name\", \"seconds\": $(python3 -c "print(round($t1 - $t0, 3))"), \"pred\": $json, \"gt\": $gt}" >> "$JSONL"
+  else
+    echo "{\"name\": \"$name\", \"failed\": true}" >> "$JSONL"
+    cat "$OUT/$name.log" >&2
+  fi
+done
+python3 - "$JSONL" <<'PY'
+import json, sys
+rows = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
+ok = [r for r in rows if not r.get("failed")]
+keys = [("precision", "P"), ("recall", "R"), ("watertightness", "watertight"), ("manifoldness", "manifold"),
+        ("nonmanifold_vertices", "nm verts"), ("scaled_jacobian", "SJ"), ("edge_ratio", "edge ratio"),
+        ("angle_dev_deg", "angle dev"), ("chamfer", "Chamfer")]
+print("| mesh | " + " | ".join(k[1] for k in keys) + " | GT SJ | quad only | s |")
+print("|---" * (len(keys) + 4) + "|")
+for r in ok:
+    p = r["pred"]
+    cells = [f"{p[k]:.4f}" if isinstance(p[k], float) else str(p[k]) for k, _ in keys]
+    print(f"| {r['name']} | " + " | ".join(cells) + f" | {r['gt']['scaled_jacobian']:.4f} | {p['quad_only']} | {r['seconds']:.1f} |")
+n = len(ok)
+if n:
+    mean = lambda k: sum(r["pred"][k] for r in ok) / n
+    cells = [f"{mean(k):.4f}" for k, _ in keys]
+    gsj = sum(r["gt"]["scaled_jacobian"] for r in ok) / n
+    allq = all(r["pred"]["quad_only"] for r in ok)
+    print(f"| **mean of {n}** | " + " | ".join(cells) + f" | {gsj:.4f} | {allq} | {sum(r['seconds'] for r in ok)/n:.1f} |")
+failed = [r["name"] for r in rows if r.get("failed")]
+if failed:
+    print("failed:", ", ".join(failed))
+PY

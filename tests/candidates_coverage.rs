@@ -1,0 +1,112 @@
+//! Coverage of the candidate quads — the share of ground-truth faces whose vertex set
+//! is among the candidates — on the shared `train/` meshes (clean, and with 10% noise
+//! points from `pipeline::noise` at its default offset, seed 1) and on synthetic
+//! shapes (`mesh::shapes`, every family, fixed seeds). Prints a table and asserts the
+//! aggregate figures reached (a regression guard; see the asserts for the numbers).
+//! `train/` only: `eval/` and `large/` are never used for tuning.
+//!
+//! Run: `cargo test --release --test candidates_coverage -- --ignored --nocapture`
+
+#[path = "common/candidates.rs"]
+mod cands_common;
+
+use cands_common::*;
+use point2quad::mesh::shapes::{random_shape_of, Family};
+use point2quad::pipeline::candidates::CandidateConfig;
+
+/// Aggregate over meshes: (faces-weighted coverage, mean per-mesh coverage, candidates per point, worst mesh).
+fn summarise(name: &str, rows: &[(String, Cov)]) -> (f64, f64, f64, f64) {
+    let mut all = Cov::default();
+    for (_, c) in rows {
+        all.add(c);
+    }
+    let mean = rows.iter().map(|(_, c)| c.ratio()).sum::<f64>() / rows.len().max(1) as f64;
+    let worst = rows.iter().map(|(_, c)| c.ratio()).fold(1.0f64, f64::min);
+    println!(
+        "{name}: coverage {:.4} (faces-weighted), {:.4} (mean of meshes), worst {:.4}; {:.2} candidates/point; generate {:.2} s total",
+        all.ratio(),
+        mean,
+        worst,
+        all.per_point(),
+        all.secs
+    );
+    (all.ratio(), mean, all.per_point(), worst)
+}
+
+#[test]
+#[ignore = "heavy: run in release by make test-heavy (a few minutes: 50 meshes twice)"]
+fn coverage_on_train_meshes_clean_and_noisy() {
+    let Some(files) = mesh_files("train") else {
+        println!("skipped: ../shared/data/quads/train not found");
+        return;
+    };
+    let cfg = CandidateConfig::default();
+    let (mut clean, mut noisy) = (Vec::new(), Vec::new());
+    println!(
+        "{:24} {:>7} {:>9} {:>7} | {:>9} {:>7}",
+        "mesh", "faces", "clean", "cand/pt", "noisy", "cand/pt"
+    );
+    for path in &files {
+        let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let mesh = load_quad_mesh(path);
+        let (c, _) = coverage(&mesh.vertices, &mesh.quads, &cfg);
+        let (n, _) = coverage(&noisy_cloud(&mesh, 1), &mesh.quads, &cfg);
+        println!(
+            "{name:24} {:7} {:9.4} {:7.2} | {:9.4} {:7.2}",
+            c.faces,
+            c.ratio(),
+            c.per_point(),
+            n.ratio(),
+            n.per_point()
+        );
+        clean.push((name.clone(), c));
+        noisy.push((name, n));
+    }
+    let (c_all, _, c_pp, _) = summarise("train clean", &clean);
+    let (n_all, _, n_pp, _) = summarise("train noisy", &noisy);
+    assert!(c_all >= CLEAN_MIN, "clean coverage {c_all:.4} < {CLEAN_MIN}");
+    assert!(n_all >= NOISY_MIN, "noisy coverage {n_all:.4} < {NOISY_MIN}");
+    assert!(c_pp <= MAX_PER_POINT && n_pp <= MAX_PER_POINT, "{c_pp:.2} / {n_pp:.2} candidates per point");
+}
+
+#[test]
+#[ignore = "heavy: run in release by make test-heavy (under a minute)"]
+fn coverage_on_synthetic_shapes_clean_and_noisy() {
+    let cfg = CandidateConfig::default();
+    let (mut clean, mut noisy) = (Vec::new(), Vec::new());
+    for family in Family::ALL {
+        for seed in 0..2u64 {
+            let mut rng = point2quad::rng::Rng::new(1000 + seed);
+            let mesh = random_shape_of(family, &mut rng);
+            let name = format!("{}#{seed}", family.name());
+            let (c, _) = coverage(&mesh.vertices, &mesh.quads, &cfg);
+            let (n, _) = coverage(&noisy_cloud(&mesh, 1), &mesh.quads, &cfg);
+            println!(
+                "{name:24} {:7} {:9.4} {:7.2} | {:9.4} {:7.2}",
+                c.faces,
+                c.ratio(),
+                c.per_point(),
+                n.ratio(),
+                n.per_point()
+            );
+            clean.push((name.clone(), c));
+            noisy.push((name, n));
+        }
+    }
+    let (c_all, _, c_pp, _) = summarise("synthetic clean", &clean);
+    let (n_all, _, n_pp, _) = summarise("synthetic noisy", &noisy);
+    assert!(c_all >= SYN_CLEAN_MIN, "clean coverage {c_all:.4} < {SYN_CLEAN_MIN}");
+    assert!(n_all >= SYN_NOISY_MIN, "noisy coverage {n_all:.4} < {SYN_NOISY_MIN}");
+    assert!(c_pp <= MAX_PER_POINT && n_pp <= MAX_PER_POINT, "{c_pp:.2} / {n_pp:.2} candidates per point");
+}
+
+// Regression guards: the aggregates measured with `CandidateConfig::default()`
+// (k = 20, 32 per proposer), rounded down. Measured: train clean 0.9750 at 9.94 per
+// point, noisy 0.9595 at 10.59; synthetic clean 1.0000 at 9.52, noisy 0.9932 at 10.03.
+// (The targets, 0.99 clean / 0.98 noisy on train, are not reached: see the
+// "Known limits" in `pipeline::candidates`.)
+const CLEAN_MIN: f64 = 0.97;
+const NOISY_MIN: f64 = 0.955;
+const SYN_CLEAN_MIN: f64 = 0.999;
+const SYN_NOISY_MIN: f64 = 0.99;
+const MAX_PER_POINT: f64 = 12.0;

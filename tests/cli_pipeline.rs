@@ -72,10 +72,14 @@ fn fails(args: &[&str], code: i32) -> String {
 /// Writes three small quad meshes into `dir`.
 fn write_meshes(dir: &str) {
     std::fs::create_dir_all(dir).unwrap();
-    let meshes =
-        [("a_sphere", shapes::cube_sphere(4)), ("b_torus", shapes::torus(12, 6, 1.0, 0.4)), ("c_tube", shapes::cylinder(12, 5, 0.5, 1.0, false))];
+    let meshes = [
+        ("a_sphere", shapes::cube_sphere(4)),
+        ("b_torus", shapes::torus(12, 6, 1.0, 0.4)),
+        ("c_tube", shapes::cylinder(12, 5, 0.5, 1.0, false)),
+    ];
     for (name, m) in meshes {
-        point2quad::io::mesh_io::write_mesh(&Path::new(dir).join(format!("{name}.obj")), &PolyMesh::from(&m)).unwrap();
+        point2quad::io::mesh_io::write_mesh(&Path::new(dir).join(format!("{name}.obj")), &PolyMesh::from(&m))
+            .unwrap();
     }
 }
 
@@ -86,7 +90,19 @@ fn trained(s: &Scratch) -> String {
     let data = s.p("data");
     ok(&["dataset", "--meshes", &meshes, "--out", &data, "--seed", "3"]);
     let model = s.p("m.p2qm");
-    let out = ok(&["train", "--data", &data, "--out", &model, "--epochs", "1", "--val-fraction", "0", "--max-candidates", "300"]);
+    let out = ok(&[
+        "train",
+        "--data",
+        &data,
+        "--out",
+        &model,
+        "--epochs",
+        "1",
+        "--val-fraction",
+        "0",
+        "--max-candidates",
+        "300",
+    ]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("epoch 1/1"), "no progress line: {err}");
     assert!(Path::new(&model).is_file() && Path::new(&format!("{model}.ckpt")).is_file());
@@ -151,9 +167,13 @@ fn reconstruct_rejects_bad_model_files_and_writes_nothing() {
         let path = s.p(name);
         std::fs::write(&path, bytes).unwrap();
         let out = s.p("never.obj");
-        let err = fails(&["reconstruct", &cloud, "-o", &out, "--model", &path, "--svg", &s.p("never.svg")], 1);
+        let err =
+            fails(&["reconstruct", &cloud, "-o", &out, "--model", &path, "--svg", &s.p("never.svg")], 1);
         assert!(err.contains(name), "{name}: message does not name the file: {err}");
-        assert!(!Path::new(&out).exists() && !Path::new(&s.p("never.svg")).exists(), "{name}: output left behind");
+        assert!(
+            !Path::new(&out).exists() && !Path::new(&s.p("never.svg")).exists(),
+            "{name}: output left behind"
+        );
     }
     // A model file that does not exist, and a folder.
     let err = fails(&["reconstruct", &cloud, "-o", &s.p("never.obj"), "--model", &s.p("missing.p2qm")], 1);
@@ -162,13 +182,27 @@ fn reconstruct_rejects_bad_model_files_and_writes_nothing() {
     assert!(err.contains("meshes"), "{err}");
     assert!(!Path::new(&s.p("never.obj")).exists());
     // Resuming from the weights-only file explains that the .ckpt is needed.
-    let err = fails(&["train", "--data", &s.p("data"), "--out", &s.p("m2.p2qm"), "--epochs", "2", "--resume", &model], 1);
+    let err = fails(
+        &["train", "--data", &s.p("data"), "--out", &s.p("m2.p2qm"), "--epochs", "2", "--resume", &model],
+        1,
+    );
     assert!(err.contains(".ckpt") && err.contains("m.p2qm"), "{err}");
     assert!(!Path::new(&s.p("m2.p2qm")).exists());
     // Resuming from the checkpoint works and continues at epoch 2.
     let out = ok(&[
-        "train", "--data", &s.p("data"), "--out", &s.p("m2.p2qm"), "--epochs", "2", "--val-fraction", "0",
-        "--max-candidates", "300", "--resume", &format!("{model}.ckpt"),
+        "train",
+        "--data",
+        &s.p("data"),
+        "--out",
+        &s.p("m2.p2qm"),
+        "--epochs",
+        "2",
+        "--val-fraction",
+        "0",
+        "--max-candidates",
+        "300",
+        "--resume",
+        &format!("{model}.ckpt"),
     ]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("epoch 2/2") && !err.contains("epoch 1/2"), "{err}");
@@ -208,7 +242,11 @@ fn clean_errors_on_empty_and_missing_inputs() {
     assert!(err.contains("missing.xyz"), "{err}");
     // Reconstruct on the same bad clouds (with a model, so the cloud is what fails).
     let model = s.p("fresh.p2qm");
-    let m = point2quad::pipeline::model::Model::new(point2quad::pipeline::model::ModelConfig::default_preset(), 0).unwrap();
+    let m = point2quad::pipeline::model::Model::new(
+        point2quad::pipeline::model::ModelConfig::default_preset(),
+        0,
+    )
+    .unwrap();
     point2quad::nn::checkpoint::save(Path::new(&model), &m.to_checkpoint(None)).unwrap();
     for name in ["nan.xyz", "two.xyz", "blank.xyz", "same.xyz"] {
         let out = s.p("r.obj");
@@ -230,4 +268,74 @@ fn help_on_every_command() {
     }
     assert!(String::from_utf8_lossy(&ok(&["--help"]).stdout).contains("COMMANDS"));
     assert_eq!(run(&["bogus"]).status.code(), Some(2));
+}
+
+/// Runs the binary with its stderr a pipe whose reading end is already closed: every
+/// progress or summary line then fails with EPIPE (Rust ignores SIGPIPE).
+fn run_with_closed_stderr(args: &[&str]) -> std::process::ExitStatus {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_point2quad"))
+        .args(args)
+        .env("RAYON_NUM_THREADS", "1")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("test: spawn");
+    drop(child.stderr.take());
+    child.wait().expect("test: wait")
+}
+
+#[test]
+fn a_closed_stderr_does_not_kill_train_or_reconstruct() {
+    // Regression: `eprint!` in the progress and summary lines panicked (exit 101) on
+    // EPIPE, so `point2quad train ... 2>&1 | head` killed the training run.
+    let s = Scratch::new("epipe");
+    let meshes = s.p("meshes");
+    write_meshes(&meshes);
+    let data = s.p("data");
+    ok(&["dataset", "--meshes", &meshes, "--out", &data]);
+    let model = s.p("m.p2qm");
+    let st = run_with_closed_stderr(&[
+        "train",
+        "--data",
+        &data,
+        "--out",
+        &model,
+        "--epochs",
+        "2",
+        "--val-fraction",
+        "0",
+        "--max-candidates",
+        "200",
+    ]);
+    assert!(st.success(), "train: {st:?}");
+    assert!(Path::new(&model).is_file());
+    let cloud = s.p("c.xyz");
+    ok(&["synth", "--from", &s.p("meshes/c_tube.obj"), "-o", &cloud]);
+    let out = s.p("o.obj");
+    let st = run_with_closed_stderr(&["reconstruct", &cloud, "-o", &out, "--model", &model]);
+    assert!(st.success(), "reconstruct: {st:?}");
+    assert!(Path::new(&out).is_file());
+}
+
+#[test]
+fn reconstruct_bounds_k() {
+    // Regression: --k 0..2 silently gave no candidates, and --k 100000 on 300 points
+    // ran for over ten minutes (enumeration grows as k³).
+    let s = Scratch::new("k");
+    let cloud = s.p("c.xyz");
+    ok(&["synth", "--shape", "cube", "-o", &cloud]);
+    let model = s.p("fresh.p2qm");
+    let m = point2quad::pipeline::model::Model::new(
+        point2quad::pipeline::model::ModelConfig::default_preset(),
+        0,
+    )
+    .unwrap();
+    point2quad::nn::checkpoint::save(Path::new(&model), &m.to_checkpoint(None)).unwrap();
+    for k in ["0", "2", "65", "100000", "-1", "x"] {
+        let out = s.p("o.obj");
+        let err = fails(&["reconstruct", &cloud, "-o", &out, "--model", &model, "--k", k], 2);
+        assert!(err.contains("--k"), "{k}: {err}");
+        assert!(!Path::new(&out).exists());
+    }
+    ok(&["reconstruct", &cloud, "-o", &s.p("o.obj"), "--model", &model, "--k", "12"]);
 }

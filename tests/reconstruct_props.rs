@@ -70,7 +70,8 @@ fn sorted(mut q: [u32; 4]) -> [u32; 4] {
 /// Candidate vertex sets of a cloud, as the pipeline computes them.
 fn candidate_sets(pts: &[[f64; 3]]) -> HashSet<[u32; 4]> {
     let f = Frame::fit(pts).expect("test: frame");
-    let c = generate(&f.to_local_all(pts), &ReconstructConfig::default().candidates).expect("test: candidates");
+    let c =
+        generate(&f.to_local_all(pts), &ReconstructConfig::default().candidates).expect("test: candidates");
     c.quads.iter().map(|&q| sorted(q)).collect()
 }
 
@@ -146,7 +147,8 @@ fn without_postprocess_returns_the_raw_predicted_faces() {
         let local = f.to_local_all(&pts);
         let c = generate(&local, &cfg.candidates).unwrap();
         let p = model().predict(&face_input(&local, &c, model().config().use_context)).unwrap();
-        let want: Vec<[u32; 4]> = c.quads.iter().zip(&p).filter(|(_, &p)| p > threshold).map(|(q, _)| *q).collect();
+        let want: Vec<[u32; 4]> =
+            c.quads.iter().zip(&p).filter(|(_, &p)| p > threshold).map(|(q, _)| *q).collect();
         assert_eq!(m.quads, want, "threshold {threshold}");
         assert_eq!(m.vertices, pts);
         if threshold == 0.0 {
@@ -192,7 +194,8 @@ fn too_few_points_and_non_finite_are_errors() {
         for (i, axis) in [(0usize, 0usize), (17, 1), (base.len() - 1, 2)] {
             let mut pts = base.clone();
             pts[i][axis] = bad;
-            let e = reconstruct(&pts, model(), &ReconstructConfig::default()).expect_err("non-finite accepted");
+            let e =
+                reconstruct(&pts, model(), &ReconstructConfig::default()).expect_err("non-finite accepted");
             assert!(e.to_string().contains(&format!("point {i} ")), "{e}");
         }
     }

@@ -40,7 +40,12 @@ fn cfg(epochs: usize) -> TrainConfig {
 
 /// Every tensor of the store (parameters and batch-norm buffers), by name, as bits.
 fn bits(m: &Model) -> Vec<(String, Vec<u32>)> {
-    m.params.ids().map(|id| (m.params.name(id).to_string(), m.params.get(id).data().iter().map(|x| x.to_bits()).collect())).collect()
+    m.params
+        .ids()
+        .map(|id| {
+            (m.params.name(id).to_string(), m.params.get(id).data().iter().map(|x| x.to_bits()).collect())
+        })
+        .collect()
 }
 
 fn no_progress(_: Progress) {}
@@ -73,7 +78,8 @@ fn resume_from_checkpoint_bytes_is_bit_identical() {
     assert_eq!(&state, &states[0], "the 1-epoch run saved the same state as the 2-epoch run after epoch 1");
     let mut resumed = Model::from_checkpoint(&ck, Path::new("mem.ckpt")).unwrap();
     assert_eq!(bits(&resumed), bits(&first), "checkpoint round trip");
-    let more = train(&mut resumed, tr, va, &cfg(2), Some(state), &mut no_progress, &mut |_, _| Ok(())).unwrap();
+    let more =
+        train(&mut resumed, tr, va, &cfg(2), Some(state), &mut no_progress, &mut |_, _| Ok(())).unwrap();
     assert_eq!(more.len(), 1);
     assert_eq!(more[0].epoch, 2);
     assert_eq!(more[0].loss.to_bits(), reps[1].loss.to_bits());
@@ -127,6 +133,11 @@ fn bad_training_inputs_are_errors() {
     .unwrap_err();
     assert!(e.to_string().contains("disk full"));
     // A momentum state that does not fit the model.
-    let bad = TrainState { epoch: 0, step: 0, rng: [1, 2, 3, 4], momentum: vec![("nope".into(), Tensor::new(&[2], vec![0.0; 2]).unwrap())] };
+    let bad = TrainState {
+        epoch: 0,
+        step: 0,
+        rng: [1, 2, 3, 4],
+        momentum: vec![("nope".into(), Tensor::new(&[2], vec![0.0; 2]).unwrap())],
+    };
     assert!(train(&mut model, &data, &[], &cfg(1), Some(bad), &mut no_progress, &mut ok).is_err());
 }

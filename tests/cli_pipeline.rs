@@ -215,6 +215,10 @@ fn clean_errors_on_empty_and_missing_inputs() {
     std::fs::create_dir_all(&empty).unwrap();
     let err = fails(&["train", "--data", &empty, "--out", &s.p("m.p2qm"), "--epochs", "1"], 2);
     assert!(err.contains("empty") && err.contains("p2qs"), "{err}");
+    for lr in ["inf", "nan", "0", "-1"] {
+        let err = fails(&["train", "--data", &empty, "--out", &s.p("m.p2qm"), "--lr", lr], 2);
+        assert!(err.contains("--lr"), "{lr}: {err}");
+    }
     let err = fails(&["train", "--data", &s.p("nowhere"), "--out", &s.p("m.p2qm")], 1);
     assert!(err.contains("nowhere"), "{err}");
     let err = fails(&["dataset", "--meshes", &s.p("nowhere"), "--out", &s.p("d")], 1);
@@ -338,4 +342,12 @@ fn reconstruct_bounds_k() {
         assert!(!Path::new(&out).exists());
     }
     ok(&["reconstruct", &cloud, "-o", &s.p("o.obj"), "--model", &model, "--k", "12"]);
+    // Regression: an unwritable --svg failed after the mesh was written, leaving it.
+    std::fs::remove_file(s.p("o.obj")).unwrap();
+    let err = fails(
+        &["reconstruct", &cloud, "-o", &s.p("o.obj"), "--model", &model, "--svg", &s.p("nodir/p.svg")],
+        1,
+    );
+    assert!(err.contains("p.svg"), "{err}");
+    assert!(!Path::new(&s.p("o.obj")).exists(), "mesh left behind");
 }

@@ -72,11 +72,12 @@ pub fn run(argv: &[String]) -> Result<()> {
     let poly = PolyMesh::from(&mesh);
     write_mesh(&out, &poly)?;
     if let Some(svg) = a.value("--svg") {
-        point2quad::io::svg::write_svg(
-            Path::new(svg),
-            &poly,
-            &point2quad::io::svg::RenderOptions::default(),
-        )?;
+        let opts = point2quad::io::svg::RenderOptions::default();
+        if let Err(e) = point2quad::io::svg::write_svg(Path::new(svg), &poly, &opts) {
+            // Half a result is worse than none (and a rerun would not notice it).
+            let _ = std::fs::remove_file(&out);
+            return Err(e);
+        }
     }
     let t_write = t1.elapsed().as_secs_f64();
     let stages: Vec<String> = std::iter::once(("read", t_read))

@@ -27,8 +27,12 @@ OPTIONS:
     --no-postprocess      write the faces the network predicts, unrepaired
                           (may be non-manifold: the paper's raw output)
     --threshold T         probability above which a candidate is kept [0.5]
-    --k K                 neighbours searched per point for candidates
+    --k K                 neighbours searched per point for candidates, 3 to 64 [20]
 ";
+
+/// Largest `--k`: candidate enumeration grows with the cube of k (k = 100000 on 300
+/// points ran for minutes); DESIGN §2 finds coverage saturated at k = 20.
+const MAX_K: usize = 64;
 
 const SPEC: Spec = Spec {
     valued: &["-o", "--output", "--model", "--svg", "--threshold", "--k"],
@@ -54,6 +58,9 @@ pub fn run(argv: &[String]) -> Result<()> {
     let mut cfg = ReconstructConfig { run_postprocess: !a.switch("--no-postprocess"), ..Default::default() };
     cfg.threshold = a.parsed(cmd, "--threshold", cfg.threshold)?;
     cfg.candidates.k = a.parsed(cmd, "--k", cfg.candidates.k)?;
+    if !(3..=MAX_K).contains(&cfg.candidates.k) {
+        return Err(Error::Usage(format!("{cmd}: --k must be between 3 and {MAX_K}")));
+    }
     // Check the output format before the work, not after it.
     point2quad::io::mesh_io::MeshFormat::from_path(&out)?;
     let t0 = std::time::Instant::now();
@@ -68,11 +75,12 @@ pub fn run(argv: &[String]) -> Result<()> {
     let poly = PolyMesh::from(&mesh);
     write_mesh(&out, &poly)?;
     if let Some(svg) = a.value("--svg") {
-        point2quad::io::svg::write_svg(
-            Path::new(svg),
-            &poly,
-            &point2quad::io::svg::RenderOptions::default(),
-        )?;
+        let opts = point2quad::io::svg::RenderOptions::default();
+        if let Err(e) = point2quad::io::svg::write_svg(Path::new(svg), &poly, &opts) {
+            // Half a result is worse than none (and a rerun would not notice it).
+            let _ = std::fs::remove_file(&out);
+            return Err(e);
+        }
     }
     let t_write = t1.elapsed().as_secs_f64();
     let stages: Vec<String> = std::iter::once(("read", t_read))
@@ -85,8 +93,9 @@ pub fn run(argv: &[String]) -> Result<()> {
         .as_ref()
         .map(|p| (p.hole_fill.quads_added(), p.refused_on_insertion + p.removed_by_score))
         .unwrap_or((0, 0));
-    eprintln!(
-        "reconstruct: {} points, {} candidates, {} predicted real, {} faces kept ({} removed/refused), {} hole quads filled ({} new vertices) -> {}",
+    // Through `output::stderr`: `eprintln!` panics when stderr is a closed pipe.
+    crate::output::stderr(&format!(
+        "reconstruct: {} points, {} candidates, {} predicted real, {} faces kept ({} removed/refused), {} hole quads filled ({} new vertices) -> {}\n",
         rep.points,
         rep.candidates,
         rep.predicted,
@@ -95,7 +104,11 @@ pub fn run(argv: &[String]) -> Result<()> {
         filled,
         rep.vertices_added,
         out.display()
-    );
-    eprintln!("reconstruct: time: {} (total {:.0} ms)", stages.join(", "), t0.elapsed().as_secs_f64() * 1e3);
+    ));
+    crate::output::stderr(&format!(
+        "reconstruct: time: {} (total {:.0} ms)\n",
+        stages.join(", "),
+        t0.elapsed().as_secs_f64() * 1e3
+    ));
     Ok(())
 }

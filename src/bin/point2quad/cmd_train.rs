@@ -7,8 +7,14 @@ use point2quad::pipeline::dataset::{load_sample, Sample, EXTENSION};
 use point2quad::pipeline::model::{Model, ModelConfig};
 use point2quad::pipeline::train::{train, Progress, TrainConfig};
 use point2quad::{Error, Result};
-use std::io::Write;
 use std::path::{Path, PathBuf};
+
+/// `eprintln!` through [`crate::output::stderr`], which ignores write errors:
+/// `eprintln!` panics when stderr is a closed pipe (`train ... 2>&1 | head`),
+/// which killed a training run at its next progress line.
+macro_rules! say {
+    ($($t:tt)*) => { crate::output::stderr(&format!("{}\n", format_args!($($t)*))) };
+}
 
 pub const HELP: &str = "\
 point2quad train: train the Point2Quad face classifier
@@ -83,7 +89,11 @@ pub fn run(argv: &[String]) -> Result<()> {
     cfg.sgd.lr = a.parsed(cmd, "--lr", cfg.sgd.lr)?;
     cfg.max_candidates = a.parsed(cmd, "--max-candidates", cfg.max_candidates)?;
     let val_fraction: f64 = a.parsed(cmd, "--val-fraction", 0.15)?;
-    if !(0.0..1.0).contains(&val_fraction) || cfg.max_candidates == 0 || !(cfg.sgd.lr.is_finite() && cfg.sgd.lr > 0.0) {
+    if !(0.0..1.0).contains(&val_fraction)
+        || cfg.max_candidates == 0
+        || !cfg.sgd.lr.is_finite()
+        || cfg.sgd.lr <= 0.0
+    {
         return Err(Error::Usage(
             "train: --val-fraction must be in [0, 1), --max-candidates and --lr positive".into(),
         ));
@@ -122,7 +132,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         return Err(Error::Usage("train: every sample fell into validation; lower --val-fraction".into()));
     }
     let cands: usize = tr.iter().map(|s| s.labels.len()).sum();
-    eprintln!(
+    say!(
         "train: {} training / {} validation samples ({cands} training candidates) loaded in {:.1}s; model '{}' with {} parameters",
         tr.len(),
         va.len(),
@@ -134,14 +144,16 @@ pub fn run(argv: &[String]) -> Result<()> {
     let t_train = std::time::Instant::now();
     let mut progress = |p: Progress| match p {
         Progress::Step { epoch, step, steps, loss } => {
-            eprint!("\repoch {epoch}/{} step {step}/{steps} loss {loss:.4}   ", cfg.epochs);
-            let _ = std::io::stderr().flush();
+            crate::output::stderr(&format!(
+                "\repoch {epoch}/{} step {step}/{steps} loss {loss:.4}   ",
+                cfg.epochs
+            ));
         }
         Progress::Epoch(r) => {
             let done = r.epoch - start_epoch;
             let per = t_train.elapsed().as_secs_f64() / done.max(1) as f64;
             let left = per * (cfg.epochs - r.epoch) as f64;
-            eprintln!(
+            say!(
                 "\repoch {}/{}: loss {:.4}, lr {:.2e}, validation precision {:.3} recall {:.3} (of GT faces {:.3}), {:.1}s, ~{:.0} min left",
                 r.epoch,
                 cfg.epochs,
@@ -162,7 +174,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     };
     let reports = train(&mut model, &tr, &va, &cfg, resume, &mut progress, &mut save)?;
     if let Some(r) = reports.last() {
-        eprintln!(
+        say!(
             "train: done in {:.1} min; final validation precision {:.3} recall {:.3}; weights in {}, checkpoint in {}",
             t_train.elapsed().as_secs_f64() / 60.0,
             r.val.precision(),
@@ -171,7 +183,7 @@ pub fn run(argv: &[String]) -> Result<()> {
             ckpt_path.display()
         );
     } else {
-        eprintln!("train: already at epoch {start_epoch} of {}; nothing to do", cfg.epochs);
+        say!("train: already at epoch {start_epoch} of {}; nothing to do", cfg.epochs);
     }
     Ok(())
 }

@@ -1,0 +1,353 @@
+//! The `point2quad` binary end to end on tiny data (synth → dataset → train →
+//! reconstruct → eval), and its errors: damaged `--model` files, resuming from a
+//! weights-only file, empty or missing folders, bad candidate inputs. Every failure
+//! exits non-zero with a message naming the file, leaves no output, never panics.
+
+#[path = "common/quality.rs"]
+mod quality_common;
+
+use point2quad::mesh::halfedge::HalfedgeMesh;
+use point2quad::mesh::poly::PolyMesh;
+use point2quad::mesh::shapes;
+use point2quad::mesh::validate::validate;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use quality_common::{parse_json, Json};
+
+/// A unique scratch folder, removed on drop.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new(tag: &str) -> Scratch {
+        static N: AtomicU64 = AtomicU64::new(0);
+        let d = std::env::temp_dir().join(format!(
+            "p2q_cli_pipeline_{tag}_{}_{}",
+            std::process::id(),
+            N.fetch_add(1, Ordering::Relaxed)
+        ));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).expect("test: scratch dir");
+        Scratch(d)
+    }
+    fn p(&self, name: &str) -> String {
+        self.0.join(name).display().to_string()
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Runs the binary; asserts no panic text whatever the outcome.
+fn run(args: &[&str]) -> Output {
+    let out = Command::new(env!("CARGO_BIN_EXE_point2quad"))
+        .args(args)
+        .env("RAYON_NUM_THREADS", "1")
+        .output()
+        .expect("test: run the binary");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked") && !err.contains("RUST_BACKTRACE"), "panic in {args:?}: {err}");
+    out
+}
+
+fn ok(args: &[&str]) -> Output {
+    let out = run(args);
+    assert!(out.status.success(), "{args:?} failed: {}", String::from_utf8_lossy(&out.stderr));
+    out
+}
+
+/// Runs a command that must fail with `code`; returns its stderr.
+fn fails(args: &[&str], code: i32) -> String {
+    let out = run(args);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(code), "{args:?}: {err}");
+    assert!(err.contains("error"), "{args:?}: no error message: {err}");
+    err
+}
+
+/// Writes three small quad meshes into `dir`.
+fn write_meshes(dir: &str) {
+    std::fs::create_dir_all(dir).unwrap();
+    let meshes = [
+        ("a_sphere", shapes::cube_sphere(4)),
+        ("b_torus", shapes::torus(12, 6, 1.0, 0.4)),
+        ("c_tube", shapes::cylinder(12, 5, 0.5, 1.0, false)),
+    ];
+    for (name, m) in meshes {
+        point2quad::io::mesh_io::write_mesh(&Path::new(dir).join(format!("{name}.obj")), &PolyMesh::from(&m))
+            .unwrap();
+    }
+}
+
+/// A weights file (1 epoch on three small meshes) and the data folder, in `s`.
+fn trained(s: &Scratch) -> String {
+    let meshes = s.p("meshes");
+    write_meshes(&meshes);
+    let data = s.p("data");
+    ok(&["dataset", "--meshes", &meshes, "--out", &data, "--seed", "3"]);
+    let model = s.p("m.p2qm");
+    let out = ok(&[
+        "train",
+        "--data",
+        &data,
+        "--out",
+        &model,
+        "--epochs",
+        "1",
+        "--val-fraction",
+        "0",
+        "--max-candidates",
+        "300",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("epoch 1/1"), "no progress line: {err}");
+    assert!(Path::new(&model).is_file() && Path::new(&format!("{model}.ckpt")).is_file());
+    model
+}
+
+#[test]
+fn synth_dataset_train_reconstruct_eval_end_to_end() {
+    let s = Scratch::new("e2e");
+    let model = trained(&s);
+    let (cloud, gt) = (s.p("cloud.xyz"), s.p("gt.obj"));
+    ok(&["synth", "--from", &s.p("meshes/a_sphere.obj"), "-o", &cloud, "--gt", &gt, "--seed", "5"]);
+    let (mesh, svg) = (s.p("out.obj"), s.p("out.svg"));
+    // One epoch on three tiny meshes predicts (almost) nothing real at 0.5, and an
+    // empty prediction is refused by `eval`; threshold 0 hands every candidate to the
+    // post-process, which must still produce a valid mesh.
+    let out = ok(&["reconstruct", &cloud, "-o", &mesh, "--model", &model, "--svg", &svg, "--threshold", "0"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("points") && err.contains("candidates") && err.contains("time"), "{err}");
+    // The output: a valid manifold pure-quad mesh whose first vertices are the cloud's.
+    let pts = point2quad::io::points::read_points(Path::new(&cloud)).unwrap();
+    let pm = point2quad::io::mesh_io::read_mesh(Path::new(&mesh)).unwrap();
+    assert!(pm.vertices.len() >= pts.len());
+    assert_eq!(&pm.vertices[..pts.len()], &pts[..], "input points not written back exactly");
+    let q = pm.to_quads().expect("pure quad");
+    assert!(!q.quads.is_empty());
+    validate(&HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).expect("manifold")).expect("valid");
+    assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
+    let out = ok(&["eval", &mesh, "--gt", &gt, "--json"]);
+    let json = parse_json(String::from_utf8_lossy(&out.stdout).trim()).expect("eval --json is JSON");
+    assert!(matches!(json, Json::Obj(_)), "{json:?}");
+    // The output's own figures are consistent with the file, and the GT figures exist.
+    assert_eq!(json.get("quads").and_then(Json::num), Some(q.quads.len() as f64));
+    assert_eq!(json.get("manifoldness").and_then(Json::num), Some(1.0));
+    for key in ["precision", "recall", "chamfer"] {
+        assert!(json.get(key).and_then(Json::num).is_some_and(f64::is_finite), "{key} in {json:?}");
+    }
+    // Raw path too.
+    let raw = s.p("raw.off");
+    ok(&["reconstruct", &cloud, "-o", &raw, "--model", &model, "--no-postprocess", "--threshold", "0.3"]);
+    assert!(Path::new(&raw).is_file());
+}
+
+#[test]
+fn reconstruct_rejects_bad_model_files_and_writes_nothing() {
+    let s = Scratch::new("badmodel");
+    let model = trained(&s);
+    let cloud = s.p("cloud.xyz");
+    ok(&["synth", "--from", &s.p("meshes/b_torus.obj"), "-o", &cloud]);
+    let good = std::fs::read(&model).unwrap();
+    let mut flipped = good.clone();
+    let mid = flipped.len() / 2;
+    flipped[mid] ^= 0x40;
+    let cases: [(&str, Vec<u8>); 5] = [
+        ("truncated.p2qm", good[..good.len() / 3].to_vec()),
+        ("short.p2qm", good[..good.len() - 1].to_vec()),
+        ("corrupted.p2qm", flipped),
+        ("empty.p2qm", Vec::new()),
+        ("text.p2qm", b"v 0 0 0\nv 1 0 0\n".to_vec()),
+    ];
+    for (name, bytes) in cases {
+        let path = s.p(name);
+        std::fs::write(&path, bytes).unwrap();
+        let out = s.p("never.obj");
+        let err =
+            fails(&["reconstruct", &cloud, "-o", &out, "--model", &path, "--svg", &s.p("never.svg")], 1);
+        assert!(err.contains(name), "{name}: message does not name the file: {err}");
+        assert!(
+            !Path::new(&out).exists() && !Path::new(&s.p("never.svg")).exists(),
+            "{name}: output left behind"
+        );
+    }
+    // A model file that does not exist, and a folder.
+    let err = fails(&["reconstruct", &cloud, "-o", &s.p("never.obj"), "--model", &s.p("missing.p2qm")], 1);
+    assert!(err.contains("missing.p2qm"), "{err}");
+    let err = fails(&["reconstruct", &cloud, "-o", &s.p("never.obj"), "--model", &s.p("meshes")], 1);
+    assert!(err.contains("meshes"), "{err}");
+    assert!(!Path::new(&s.p("never.obj")).exists());
+    // Resuming from the weights-only file explains that the .ckpt is needed.
+    let err = fails(
+        &["train", "--data", &s.p("data"), "--out", &s.p("m2.p2qm"), "--epochs", "2", "--resume", &model],
+        1,
+    );
+    assert!(err.contains(".ckpt") && err.contains("m.p2qm"), "{err}");
+    assert!(!Path::new(&s.p("m2.p2qm")).exists());
+    // Resuming from the checkpoint works and continues at epoch 2.
+    let out = ok(&[
+        "train",
+        "--data",
+        &s.p("data"),
+        "--out",
+        &s.p("m2.p2qm"),
+        "--epochs",
+        "2",
+        "--val-fraction",
+        "0",
+        "--max-candidates",
+        "300",
+        "--resume",
+        &format!("{model}.ckpt"),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("epoch 2/2") && !err.contains("epoch 1/2"), "{err}");
+}
+
+#[test]
+fn clean_errors_on_empty_and_missing_inputs() {
+    let s = Scratch::new("errors");
+    let empty = s.p("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let err = fails(&["train", "--data", &empty, "--out", &s.p("m.p2qm"), "--epochs", "1"], 2);
+    assert!(err.contains("empty") && err.contains("p2qs"), "{err}");
+    for lr in ["inf", "nan", "0", "-1"] {
+        let err = fails(&["train", "--data", &empty, "--out", &s.p("m.p2qm"), "--lr", lr], 2);
+        assert!(err.contains("--lr"), "{lr}: {err}");
+    }
+    let err = fails(&["train", "--data", &s.p("nowhere"), "--out", &s.p("m.p2qm")], 1);
+    assert!(err.contains("nowhere"), "{err}");
+    let err = fails(&["dataset", "--meshes", &s.p("nowhere"), "--out", &s.p("d")], 1);
+    assert!(err.contains("nowhere"), "{err}");
+    assert!(!Path::new(&s.p("m.p2qm")).exists());
+    // Candidates on bad point files.
+    let cand = s.p("c.txt");
+    let cases: [(&str, &str); 5] = [
+        ("nan.xyz", "0 0 0\n1 0 0\nnan 1 0\n0 0 1\n1 1 1\n"),
+        ("two.xyz", "0 0 0\n1 0 0\n"),
+        ("blank.xyz", ""),
+        ("words.xyz", "hello world\n"),
+        ("same.xyz", "1 2 3\n1 2 3\n1 2 3\n1 2 3\n1 2 3\n"),
+    ];
+    for (name, text) in cases {
+        let p = s.p(name);
+        std::fs::write(&p, text).unwrap();
+        let out = run(&["candidates", &p, "-o", &cand]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{name}: {err}");
+        assert!(err.contains(name), "{name}: {err}");
+        assert!(!Path::new(&cand).exists(), "{name}: output left behind");
+    }
+    let err = fails(&["candidates", &s.p("missing.xyz"), "-o", &cand], 1);
+    assert!(err.contains("missing.xyz"), "{err}");
+    // Reconstruct on the same bad clouds (with a model, so the cloud is what fails).
+    let model = s.p("fresh.p2qm");
+    let m = point2quad::pipeline::model::Model::new(
+        point2quad::pipeline::model::ModelConfig::default_preset(),
+        0,
+    )
+    .unwrap();
+    point2quad::nn::checkpoint::save(Path::new(&model), &m.to_checkpoint(None)).unwrap();
+    for name in ["nan.xyz", "two.xyz", "blank.xyz", "same.xyz"] {
+        let out = s.p("r.obj");
+        let err = fails(&["reconstruct", &s.p(name), "-o", &out, "--model", &model], 1);
+        assert!(err.contains(name) || err.contains("point"), "{name}: {err}");
+        assert!(!Path::new(&out).exists());
+    }
+}
+
+#[test]
+fn help_on_every_command() {
+    for cmd in ["reconstruct", "candidates", "eval", "dataset", "train", "repair", "render", "synth"] {
+        for flag in ["--help", "-h"] {
+            let out = ok(&[cmd, flag]);
+            let text = String::from_utf8_lossy(&out.stdout);
+            assert!(text.starts_with(&format!("point2quad {cmd}")), "{cmd} {flag}: {text}");
+            assert!(text.contains("USAGE"), "{cmd}: {text}");
+        }
+    }
+    assert!(String::from_utf8_lossy(&ok(&["--help"]).stdout).contains("COMMANDS"));
+    assert_eq!(run(&["bogus"]).status.code(), Some(2));
+}
+
+/// Runs the binary with its stderr a pipe whose reading end is already closed: every
+/// progress or summary line then fails with EPIPE (Rust ignores SIGPIPE).
+fn run_with_closed_stderr(args: &[&str]) -> std::process::ExitStatus {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_point2quad"))
+        .args(args)
+        .env("RAYON_NUM_THREADS", "1")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("test: spawn");
+    drop(child.stderr.take());
+    child.wait().expect("test: wait")
+}
+
+#[test]
+fn a_closed_stderr_does_not_kill_train_or_reconstruct() {
+    // Regression: `eprint!` in the progress and summary lines panicked (exit 101) on
+    // EPIPE, so `point2quad train ... 2>&1 | head` killed the training run.
+    let s = Scratch::new("epipe");
+    let meshes = s.p("meshes");
+    write_meshes(&meshes);
+    let data = s.p("data");
+    ok(&["dataset", "--meshes", &meshes, "--out", &data]);
+    let model = s.p("m.p2qm");
+    let st = run_with_closed_stderr(&[
+        "train",
+        "--data",
+        &data,
+        "--out",
+        &model,
+        "--epochs",
+        "2",
+        "--val-fraction",
+        "0",
+        "--max-candidates",
+        "200",
+    ]);
+    assert!(st.success(), "train: {st:?}");
+    assert!(Path::new(&model).is_file());
+    let cloud = s.p("c.xyz");
+    ok(&["synth", "--from", &s.p("meshes/c_tube.obj"), "-o", &cloud]);
+    let out = s.p("o.obj");
+    let st = run_with_closed_stderr(&["reconstruct", &cloud, "-o", &out, "--model", &model]);
+    assert!(st.success(), "reconstruct: {st:?}");
+    assert!(Path::new(&out).is_file());
+}
+
+#[test]
+fn reconstruct_bounds_k() {
+    // Regression: --k 0..2 silently gave no candidates, and --k 100000 on 300 points
+    // ran for over ten minutes (enumeration grows as k³).
+    let s = Scratch::new("k");
+    let cloud = s.p("c.xyz");
+    ok(&["synth", "--shape", "cube", "-o", &cloud]);
+    let model = s.p("fresh.p2qm");
+    let m = point2quad::pipeline::model::Model::new(
+        point2quad::pipeline::model::ModelConfig::default_preset(),
+        0,
+    )
+    .unwrap();
+    point2quad::nn::checkpoint::save(Path::new(&model), &m.to_checkpoint(None)).unwrap();
+    for k in ["0", "2", "65", "100000", "-1", "x"] {
+        let out = s.p("o.obj");
+        let err = fails(&["reconstruct", &cloud, "-o", &out, "--model", &model, "--k", k], 2);
+        assert!(err.contains("--k"), "{k}: {err}");
+        assert!(!Path::new(&out).exists());
+    }
+    ok(&["reconstruct", &cloud, "-o", &s.p("o.obj"), "--model", &model, "--k", "12"]);
+    // Regression: an unwritable --svg failed after the mesh was written, leaving it.
+    std::fs::remove_file(s.p("o.obj")).unwrap();
+    let err = fails(
+        &["reconstruct", &cloud, "-o", &s.p("o.obj"), "--model", &model, "--svg", &s.p("nodir/p.svg")],
+        1,
+    );
+    assert!(err.contains("p.svg"), "{err}");
+    assert!(!Path::new(&s.p("o.obj")).exists(), "mesh left behind");
+}

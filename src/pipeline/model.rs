@@ -86,7 +86,8 @@ impl ModelConfig {
 
     /// Width of the face encoder's input.
     pub fn face_in(&self) -> usize {
-        crate::pipeline::features::F_INFO_DIM + if self.use_context { crate::pipeline::features::CONTEXT_DIM } else { 0 }
+        crate::pipeline::features::F_INFO_DIM
+            + if self.use_context { crate::pipeline::features::CONTEXT_DIM } else { 0 }
     }
 
     /// The config as `key = value` lines (stored in checkpoints).
@@ -152,7 +153,10 @@ impl ModelConfig {
                 return Err(Error::parse(
                     name,
                     0,
-                    format!("model config: weights expect {fi} input features, this build computes {}", c.face_in()),
+                    format!(
+                        "model config: weights expect {fi} input features, this build computes {}",
+                        c.face_in()
+                    ),
                 ));
             }
         }
@@ -201,7 +205,15 @@ impl Model {
         let mut classifier = Vec::new();
         let mut cin = 4 * config.point_dim + w[4];
         for (i, &cout) in config.classifier_widths.iter().enumerate() {
-            classifier.push(ConvBnAct::new(&mut params, &format!("cls.{i}"), cin, cout, Act::Relu, bn, &mut rng)?);
+            classifier.push(ConvBnAct::new(
+                &mut params,
+                &format!("cls.{i}"),
+                cin,
+                cout,
+                Act::Relu,
+                bn,
+                &mut rng,
+            )?);
             cin = cout;
         }
         let head = Conv1d::new(&mut params, "cls.head", cin, 2, true, &mut rng)?;
@@ -226,14 +238,20 @@ impl Model {
     pub fn predict(&self, face_features: &[f32]) -> Result<Vec<f32>> {
         let fin = self.net.config.face_in();
         if face_features.len() % fin != 0 {
-            return Err(Error::Shape { op: "predict", msg: format!("{} values is not M × {fin}", face_features.len()) });
+            return Err(Error::Shape {
+                op: "predict",
+                msg: format!("{} values is not M × {fin}", face_features.len()),
+            });
         }
         let m = face_features.len() / fin;
         if m == 0 {
             return Ok(Vec::new());
         }
         if self.net.config.point_dim > 0 {
-            return Err(Error::Shape { op: "predict", msg: "point-encoder models need predict_with_points".into() });
+            return Err(Error::Shape {
+                op: "predict",
+                msg: "point-encoder models need predict_with_points".into(),
+            });
         }
         let mut g = Graph::eval_shared(&self.params);
         let x = g.input(Tensor::new(&[m, fin], face_features.to_vec())?);
@@ -252,8 +270,10 @@ impl Model {
     /// `Error::Checkpoint` for a corrupt file, a config this build cannot read, or
     /// tensors that do not match the config.
     pub fn from_checkpoint(ckpt: &Checkpoint, name: &Path) -> Result<Model> {
-        let text = std::str::from_utf8(&ckpt.config)
-            .map_err(|_| Error::Checkpoint { path: name.to_path_buf(), msg: "model config is not UTF-8".into() })?;
+        let text = std::str::from_utf8(&ckpt.config).map_err(|_| Error::Checkpoint {
+            path: name.to_path_buf(),
+            msg: "model config is not UTF-8".into(),
+        })?;
         let config = ModelConfig::from_text(text, name)
             .map_err(|e| Error::Checkpoint { path: name.to_path_buf(), msg: e.to_string() })?;
         let mut model = Model::new(config, 0)?;
@@ -285,7 +305,12 @@ impl Network {
     ///
     /// # Errors
     /// `Error::Shape` when the inputs do not match the config.
-    pub fn forward(&self, g: &mut Graph, face_features: Var, point: Option<(Var, Arc<[u32]>)>) -> Result<Var> {
+    pub fn forward(
+        &self,
+        g: &mut Graph,
+        face_features: Var,
+        point: Option<(Var, Arc<[u32]>)>,
+    ) -> Result<Var> {
         let mut h = face_features;
         for (i, layer) in self.face.iter().enumerate() {
             let next = layer.forward(g, h)?;
@@ -306,7 +331,10 @@ impl Network {
                 msg: "this model needs per-point features (point_dim > 0)".into(),
             })?;
             if corners.len() != 4 * m {
-                return Err(Error::Shape { op: "model", msg: format!("{} corner indices for {m} candidates", corners.len()) });
+                return Err(Error::Shape {
+                    op: "model",
+                    msg: format!("{} corner indices for {m} candidates", corners.len()),
+                });
             }
             let gathered = g.gather_rows(pf, corners, false)?;
             let gathered = g.reshape(gathered, &[m, 4 * self.config.point_dim])?;

@@ -46,7 +46,13 @@ impl Default for TrainConfig {
         TrainConfig {
             epochs: 40,
             seed: 0,
-            sgd: SgdConfig { lr: 0.01, momentum: 0.95, weight_decay: 1e-4, clip: Some(100.0), nesterov: false },
+            sgd: SgdConfig {
+                lr: 0.01,
+                momentum: 0.95,
+                weight_decay: 1e-4,
+                clip: Some(100.0),
+                nesterov: false,
+            },
             decay_period: 30.0,
             pos_weight: None,
             face_loss_weight: 1.0,

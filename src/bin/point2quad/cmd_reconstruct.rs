@@ -65,7 +65,11 @@ pub fn run(argv: &[String]) -> Result<()> {
     let poly = PolyMesh::from(&mesh);
     write_mesh(&out, &poly)?;
     if let Some(svg) = a.value("--svg") {
-        point2quad::io::svg::write_svg(Path::new(svg), &poly, &point2quad::io::svg::RenderOptions::default())?;
+        point2quad::io::svg::write_svg(
+            Path::new(svg),
+            &poly,
+            &point2quad::io::svg::RenderOptions::default(),
+        )?;
     }
     let t_write = t1.elapsed().as_secs_f64();
     let stages: Vec<String> = std::iter::once(("read", t_read))

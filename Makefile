@@ -3,7 +3,7 @@ CARGO ?= cargo
 BIN := target/release/point2quad
 WASM_TARGET := wasm32-unknown-unknown
 
-.PHONY: all build demo test fmt fmt-check clippy wasm nodefault test-debug test-heavy bench coverage clean help
+.PHONY: all build demo train quality test fmt fmt-check clippy wasm nodefault test-debug test-heavy bench coverage clean help
 
 all: build
 
@@ -11,6 +11,8 @@ help:
 	@echo "make demo   - build, reconstruct/process a shipped example, write results under out/demo"
 	@echo "make test   - fmt check, clippy -D warnings, no-default-features + wasm builds, all tests"
 	@echo "make bench  - benchmarks (one 'bench <name> <value> <unit>' line per figure)"
+	@echo "make train  - rebuild the shipped weights (scripts/train.sh: data, seed, epochs)"
+	@echo "make quality - reconstruct every ../shared/data/quads/eval mesh (10% noise and clean) and tabulate metrics"
 	@echo "make coverage - candidate coverage on synthetic shapes and ../shared/data/quads/train"
 
 build:
@@ -19,6 +21,13 @@ build:
 demo: build
 	@mkdir -p out/demo
 	./scripts/demo.sh $(BIN) out/demo
+
+train: build
+	./scripts/train.sh $(BIN)
+
+quality: build
+	./scripts/quality_table.sh $(BIN) ../shared/data/quads/eval 0.1
+	./scripts/quality_table.sh $(BIN) ../shared/data/quads/eval 0
 
 test: fmt-check clippy nodefault wasm test-debug test-heavy
 	@echo "make test: all checks passed"

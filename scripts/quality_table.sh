@@ -3,6 +3,7 @@
 # cloud (its vertices + NOISE × #vertices noise points, seed 1), reconstruct, and
 # compare with the ground truth. Prints one markdown row per mesh and the means.
 #   scripts/quality_table.sh BIN MESH_DIR [NOISE] [MODEL] [OUTDIR]
+# Extra reconstruct options can be given in RECONSTRUCT_ARGS (e.g. "--threshold 0.7").
 # Example: scripts/quality_table.sh target/release/point2quad ../shared/data/quads/eval 0.1
 set -euo pipefail
 BIN=$1; DIR=$2; NOISE=${3:-0.1}; MODEL=${4:-}; OUT=${5:-out/quality}
@@ -13,7 +14,7 @@ for f in "$DIR"/*.obj "$DIR"/*.off "$DIR"/*.ply; do
   name=$(basename "${f%.*}")
   "$BIN" synth --from "$f" --noise "$NOISE" --seed 1 -o "$OUT/$name.xyz" 2>/dev/null
   t0=$(date +%s.%N)
-  if "$BIN" reconstruct "$OUT/$name.xyz" -o "$OUT/$name.obj" ${MODEL:+--model "$MODEL"} \
+  if "$BIN" reconstruct "$OUT/$name.xyz" -o "$OUT/$name.obj" ${MODEL:+--model "$MODEL"} ${RECONSTRUCT_ARGS:-} \
        --svg "$OUT/$name.svg" 2> "$OUT/$name.log"; then
     t1=$(date +%s.%N)
     json=$("$BIN" eval "$OUT/$name.obj" --gt "$f" --json)

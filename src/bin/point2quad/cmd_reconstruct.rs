@@ -35,10 +35,13 @@ const SPEC: Spec = Spec {
     switches: &["--no-postprocess"],
 };
 
-/// The weights shipped with the project (`make train` writes them).
+/// The weights shipped with the project (`make train` writes them), embedded in the
+/// binary so that it works from anywhere.
+const SHIPPED_WEIGHTS: &[u8] = include_bytes!("../../../fixtures/point2quad-default.p2qm");
+
+/// The shipped model.
 pub fn shipped_model() -> Result<Model> {
-    let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/point2quad-default.p2qm"));
-    Model::load(path)
+    Model::from_bytes(SHIPPED_WEIGHTS, Path::new("<shipped fixtures/point2quad-default.p2qm>"))
 }
 
 pub fn run(argv: &[String]) -> Result<()> {

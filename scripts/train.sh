@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# make train: the recipe behind fixtures/point2quad-default.p2qm.
+# Data: 80 synthetic shapes (seed 7) + every mesh of ../shared/data/quads/train when
+# present (never eval/ or large/), 10% noise points; then 40 epochs of the default
+# preset, seed 0. Resumes from out/train/model.p2qm.ckpt if a run was interrupted.
+set -euo pipefail
+BIN=${1:-target/release/point2quad}
+EPOCHS=${EPOCHS:-40}
+DATA=out/train/data; MODEL=out/train/model.p2qm
+mkdir -p out/train
+if [ ! -f "$DATA/index.txt" ]; then
+  MESHES=()
+  if [ -d ../shared/data/quads/train ]; then MESHES=(--meshes ../shared/data/quads/train);
+  else echo "train: ../shared/data/quads/train not found: synthetic data only"; fi
+  rm -rf "$DATA"
+  "$BIN" dataset --out "$DATA" --synthetic 80 "${MESHES[@]}" --noise 0.1 --seed 7
+fi
+RESUME=()
+[ -f "$MODEL.ckpt" ] && RESUME=(--resume "$MODEL.ckpt")
+"$BIN" train --data "$DATA" --out "$MODEL" --config default --epochs "$EPOCHS" --seed 0 "${RESUME[@]}"
+cp "$MODEL" fixtures/point2quad-default.p2qm
+echo "train: weights copied to fixtures/point2quad-default.p2qm"

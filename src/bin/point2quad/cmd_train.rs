@@ -83,7 +83,10 @@ pub fn run(argv: &[String]) -> Result<()> {
     cfg.sgd.lr = a.parsed(cmd, "--lr", cfg.sgd.lr)?;
     cfg.max_candidates = a.parsed(cmd, "--max-candidates", cfg.max_candidates)?;
     let val_fraction: f64 = a.parsed(cmd, "--val-fraction", 0.15)?;
-    if !(0.0..1.0).contains(&val_fraction) || cfg.max_candidates == 0 || !(cfg.sgd.lr.is_finite() && cfg.sgd.lr > 0.0) {
+    if !(0.0..1.0).contains(&val_fraction)
+        || cfg.max_candidates == 0
+        || !(cfg.sgd.lr.is_finite() && cfg.sgd.lr > 0.0)
+    {
         return Err(Error::Usage(
             "train: --val-fraction must be in [0, 1), --max-candidates and --lr positive".into(),
         ));

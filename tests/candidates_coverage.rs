@@ -135,7 +135,8 @@ const NOISY_MIN: f64 = 0.955;
 const SYN_CLEAN_MIN: f64 = 0.999;
 const SYN_NOISY_MIN: f64 = 0.99;
 const MAX_PER_POINT: f64 = 12.0;
-// The same on the `make test` subset (every 3rd train mesh by name), rounded down.
-// Measured: clean TODO, noisy TODO.
-const SUBSET_CLEAN_MIN: f64 = 0.0;
-const SUBSET_NOISY_MIN: f64 = 0.0;
+// The same on the `make test` subset (every 3rd train mesh by name: 17 meshes, with
+// qm_hedgehog_spikes, hence lower than the full run), rounded down. Measured: clean
+// 0.9535 at 9.93 per point, noisy 0.9351 at 10.71.
+const SUBSET_CLEAN_MIN: f64 = 0.95;
+const SUBSET_NOISY_MIN: f64 = 0.935;

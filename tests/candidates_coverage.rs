@@ -5,7 +5,13 @@
 //! aggregate figures reached (a regression guard; see the asserts for the numbers).
 //! `train/` only: `eval/` and `large/` are never used for tuning.
 //!
-//! Run: `cargo test --release --test candidates_coverage -- --ignored --nocapture`
+//! Under `make test` the train measurement covers a deterministic subset (every 3rd
+//! mesh in name order, 17 of 50) so the suite fits the CI budget; the subset has its
+//! own measured thresholds. `P2Q_FULL_COVERAGE=1` (what `make coverage` sets) measures
+//! all train meshes against the full-run thresholds.
+//!
+//! Run: `make coverage`, or
+//! `P2Q_FULL_COVERAGE=1 cargo test --release --test candidates_coverage -- --ignored --nocapture`
 
 #[path = "common/candidates.rs"]
 mod cands_common;
@@ -33,13 +39,32 @@ fn summarise(name: &str, rows: &[(String, Cov)]) -> (f64, f64, f64, f64) {
     (all.ratio(), mean, all.per_point(), worst)
 }
 
+/// Whether the full train measurement is asked for (`P2Q_FULL_COVERAGE` set to
+/// anything but empty or `0`).
+fn full_coverage() -> bool {
+    std::env::var("P2Q_FULL_COVERAGE").is_ok_and(|v| !v.is_empty() && v != "0")
+}
+
+/// Every `SUBSET_STEP`-th train mesh (in name order, starting with the first) is
+/// measured under `make test`.
+const SUBSET_STEP: usize = 3;
+
 #[test]
-#[ignore = "heavy: run in release by make test-heavy (a few minutes: 50 meshes twice)"]
+#[ignore = "heavy: run in release by make test-heavy (about a minute on the subset; P2Q_FULL_COVERAGE=1: all 50 meshes)"]
 fn coverage_on_train_meshes_clean_and_noisy() {
-    let Some(files) = mesh_files("train") else {
+    let Some(all_files) = mesh_files("train") else {
         println!("skipped: ../shared/data/quads/train not found");
         return;
     };
+    let full = full_coverage();
+    let files: Vec<_> = if full { all_files } else { all_files.into_iter().step_by(SUBSET_STEP).collect() };
+    let (clean_min, noisy_min) =
+        if full { (CLEAN_MIN, NOISY_MIN) } else { (SUBSET_CLEAN_MIN, SUBSET_NOISY_MIN) };
+    println!(
+        "{} train meshes ({})",
+        files.len(),
+        if full { "all: P2Q_FULL_COVERAGE" } else { "subset: every 3rd; P2Q_FULL_COVERAGE=1 for all" }
+    );
     let cfg = CandidateConfig::default();
     let (mut clean, mut noisy) = (Vec::new(), Vec::new());
     println!(
@@ -64,8 +89,8 @@ fn coverage_on_train_meshes_clean_and_noisy() {
     }
     let (c_all, _, c_pp, _) = summarise("train clean", &clean);
     let (n_all, _, n_pp, _) = summarise("train noisy", &noisy);
-    assert!(c_all >= CLEAN_MIN, "clean coverage {c_all:.4} < {CLEAN_MIN}");
-    assert!(n_all >= NOISY_MIN, "noisy coverage {n_all:.4} < {NOISY_MIN}");
+    assert!(c_all >= clean_min, "clean coverage {c_all:.4} < {clean_min}");
+    assert!(n_all >= noisy_min, "noisy coverage {n_all:.4} < {noisy_min}");
     assert!(c_pp <= MAX_PER_POINT && n_pp <= MAX_PER_POINT, "{c_pp:.2} / {n_pp:.2} candidates per point");
 }
 
@@ -110,3 +135,8 @@ const NOISY_MIN: f64 = 0.955;
 const SYN_CLEAN_MIN: f64 = 0.999;
 const SYN_NOISY_MIN: f64 = 0.99;
 const MAX_PER_POINT: f64 = 12.0;
+// The same on the `make test` subset (every 3rd train mesh by name: 17 meshes, with
+// qm_hedgehog_spikes, hence lower than the full run), rounded down. Measured: clean
+// 0.9535 at 9.93 per point, noisy 0.9351 at 10.71.
+const SUBSET_CLEAN_MIN: f64 = 0.95;
+const SUBSET_NOISY_MIN: f64 = 0.935;

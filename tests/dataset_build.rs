@@ -6,11 +6,11 @@ use std::path::PathBuf;
 use std::process::Command;
 
 use point2quad::mesh::shapes;
-use point2quad::pipeline::candidates::CandidateConfig;
+use point2quad::pipeline::candidates::{generate, CandidateConfig};
 use point2quad::pipeline::dataset::{
     build_sample, encode_sample, label_candidates, load_sample, read_sample,
 };
-use point2quad::pipeline::features::F_INFO_DIM;
+use point2quad::pipeline::features::{face_input, CONTEXT_DIM, F_INFO_DIM};
 use point2quad::pipeline::frame::Frame;
 use point2quad::pipeline::noise::{noise_points, NoiseConfig};
 use point2quad::rng::Rng;
@@ -32,8 +32,11 @@ fn sample_layout_labels_and_determinism() {
         assert_eq!(*p, frame.to_local(*q));
     }
     assert_eq!(s.gt_faces, mesh.quads);
-    assert_eq!(s.feature_dim as usize, F_INFO_DIM);
-    assert_eq!(s.features.len(), s.candidates.len() * F_INFO_DIM);
+    // Samples store F_info, then the context features (what the default model reads).
+    let dim = F_INFO_DIM + CONTEXT_DIM;
+    assert_eq!(s.feature_dim as usize, dim);
+    assert_eq!(s.features.len(), s.candidates.len() * dim);
+    assert_eq!(s.features, face_input(&s.points, &generate(&s.points, &cfg).unwrap(), true));
     assert_eq!(s.labels, label_candidates(&s.candidates, &mesh.quads));
     assert!(s.positives() > 0 && s.coverage() > 0.0);
     // Same seed, same bytes; round trip through the format.

@@ -299,6 +299,7 @@ fn orient2(a: [f32; 2], b: [f32; 2], c: [f32; 2]) -> f32 {
     (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
 }
 
+#[cfg(test)]
 /// +1 if the 2-D polygon is strictly convex counter-clockwise, −1 clockwise, 0 otherwise.
 #[inline]
 fn convex_sign(q: [[f32; 2]; 4]) -> i32 {
@@ -341,7 +342,62 @@ fn coord_order(points: &[[f32; 3]], a: &[u32; 4], b: &[u32; 4]) -> std::cmp::Ord
     std::cmp::Ordering::Equal
 }
 
-/// The candidates proposed by point `i`, best first, at most `cfg.per_point`.
+/// Per-thread buffers of [`propose`], reused from one proposer to the next.
+///
+/// The per-pair tables are over local ids (0 = the proposer, 1 + j = neighbour j),
+/// row-major with `w = m + 1` columns. Every entry is computed with exactly the
+/// expression the per-triple code used before it was tabled (same operands, same
+/// order), so the filters see bit-identical values.
+#[derive(Default)]
+struct Scratch {
+    nb: Vec<u32>,
+    rel: Vec<[f32; 3]>,
+    uv: Vec<[f32; 2]>,
+    /// `e[x·w + y] = pos3(y) − pos3(x)`: the edge vector from x to y.
+    e: Vec<[f32; 3]>,
+    /// `d[x·w + y] = |e[x·w + y]|`.
+    d: Vec<f32>,
+    /// Signs of `orient2(x, 0, y)`, `orient2(0, x, y)`, `orient2(x, y, 0)`.
+    t1: Vec<i8>,
+    t2: Vec<i8>,
+    t3: Vec<i8>,
+    pre: Vec<Pre>,
+    keys: Vec<(f32, u32)>,
+    out: Vec<Kept>,
+}
+
+#[inline]
+fn sign(x: f32) -> i8 {
+    if x > 0.0 {
+        1
+    } else if x < 0.0 {
+        -1
+    } else {
+        0
+    }
+}
+
+/// The candidates proposed by point `i`, best first, at most `cfg.per_point`, left in
+/// `sc.out`.
+///
+/// Equivalent, bit for bit, to the straightforward loop (every triple: try the three
+/// cyclic orders with [`convex_sign`], then [`quad_geom`] and the filters), which it
+/// replaces for speed:
+/// * the four orientation tests of a cyclic order are three proposer/pair tests
+///   (tabled once per proposer) and one triple test, evaluated only when the pair
+///   tests agree; a cyclic order is convex iff all four signs agree and are non-zero;
+/// * edge vectors and lengths come from per-pair tables, so the edge-ratio and
+///   maximum-edge filters run before any per-triple arithmetic;
+/// * corners are computed one at a time and the triple is dropped at the first failed
+///   sine or normal test (the filters are a conjunction, so the order of the tests
+///   does not matter); the diagonal normal and the Jacobian only for survivors.
+///
+/// The budget selection visits the survivors by base score. With no two bit-identical
+/// points among the proposer and its neighbours, the (score, coordinates) order of
+/// kept candidates is strict, so the kept list does not depend on the visiting order
+/// among equal base scores and a small index sort replaces sorting the survivors
+/// themselves; otherwise (duplicates, or a NaN score) the survivors are sorted exactly
+/// as before, so ties resolve as they always did.
 fn propose(
     i: usize,
     points: &[[f32; 3]],
@@ -349,57 +405,86 @@ fn propose(
     spacing: &[f32],
     knn: &KnnTable,
     cfg: &CandidateConfig,
-) -> Vec<Kept> {
+    sc: &mut Scratch,
+) {
     let n = points.len();
     let p = points[i];
     let np = normals[i];
     let (tu, tv) = tangent_basis(np);
-    let nb: Vec<u32> = neighbours(knn, n, i, cfg.k).collect();
-    let rel: Vec<[f32; 3]> = nb.iter().map(|&j| sub(points[j as usize], p)).collect();
-    let uv: Vec<[f32; 2]> = rel.iter().map(|r| [dot(*r, tu), dot(*r, tv)]).collect();
+    sc.nb.clear();
+    sc.nb.extend(neighbours(knn, n, i, cfg.k));
+    let nb = &sc.nb;
+    sc.rel.clear();
+    sc.rel.extend(nb.iter().map(|&j| sub(points[j as usize], p)));
+    let rel = &sc.rel;
+    sc.uv.clear();
+    sc.uv.extend(rel.iter().map(|r| [dot(*r, tu), dot(*r, tv)]));
+    let uv = &sc.uv;
     let m = nb.len();
-    let mut pre: Vec<Pre> = Vec::new();
+    let w = m + 1;
+    sc.pre.clear();
+    sc.out.clear();
     // Local ids: 0 = the proposer, 1 + j = neighbour j.
     let pos3 = |l: usize| if l == 0 { [0.0f32; 3] } else { rel[l - 1] };
     let pos2 = |l: usize| if l == 0 { [0.0f32; 2] } else { uv[l - 1] };
     let gid = |l: usize| if l == 0 { i as u32 } else { nb[l - 1] };
+    sc.e.clear();
+    sc.d.clear();
+    sc.t1.clear();
+    sc.t2.clear();
+    sc.t3.clear();
+    let o = [0.0f32; 2];
+    for x in 0..w {
+        for y in 0..w {
+            let ev = sub(pos3(y), pos3(x));
+            sc.e.push(ev);
+            sc.d.push(norm(ev));
+            sc.t1.push(sign(orient2(pos2(x), o, pos2(y))));
+            sc.t2.push(sign(orient2(o, pos2(x), pos2(y))));
+            sc.t3.push(sign(orient2(pos2(x), pos2(y), o)));
+        }
+    }
+    let (e, d, t1, t2, t3) = (&sc.e, &sc.d, &sc.t1, &sc.t2, &sc.t3);
+    let at = |x: usize, y: usize| x * w + y;
     for a in 1..=m {
         for b in a + 1..=m {
             for c in b + 1..=m {
-                let mut order = None;
-                for cand in [[0, a, b, c], [0, a, c, b], [0, b, a, c]] {
-                    let s = convex_sign(cand.map(pos2));
-                    if s > 0 {
-                        order = Some(cand);
-                        break;
-                    } else if s < 0 {
-                        order = Some([cand[0], cand[3], cand[2], cand[1]]);
-                        break;
+                // The three cyclic orders, tried in this order, as before:
+                // [0, a, b, c], [0, a, c, b], [0, b, a, c]. For an order [0, x, y, z]
+                // convex_sign tests orient2(z, 0, x), (0, x, y), (x, y, z), (y, z, 0).
+                let mut ord = None;
+                let mut oabc = None;
+                let s = t1[at(c, a)];
+                if s != 0 && t2[at(a, b)] == s && t3[at(b, c)] == s {
+                    let t = sign(orient2(pos2(a), pos2(b), pos2(c)));
+                    oabc = Some(t);
+                    if t == s {
+                        ord = Some(if s > 0 { [0, a, b, c] } else { [0, c, b, a] });
                     }
                 }
-                let Some(ord) = order else { continue };
-                let q3 = ord.map(pos3);
-                let g = quad_geom(q3);
-                let lmin = g.len.iter().copied().fold(f32::INFINITY, f32::min);
-                let lmax = g.len.iter().copied().fold(0.0f32, f32::max);
-                if lmin.is_nan() || lmin <= 0.0 || lmin < cfg.min_edge_ratio * lmax {
-                    continue;
-                }
-                if g.sine.iter().any(|&s| s < cfg.min_sine) {
-                    continue;
-                }
-                let mut planar = true;
-                for x in 0..4 {
-                    if dot(g.corner_normal[x], np) <= 0.0 {
-                        planar = false;
-                    }
-                    for y in x + 1..4 {
-                        if dot(g.corner_normal[x], g.corner_normal[y]) < cfg.min_normal_dot {
-                            planar = false;
+                if ord.is_none() {
+                    // orient2(a, c, b) is exactly −orient2(a, b, c) (the same two
+                    // products, subtracted the other way round).
+                    let s = t1[at(b, a)];
+                    if s != 0 && t2[at(a, c)] == s && t3[at(c, b)] == s {
+                        let t = -oabc.unwrap_or_else(|| sign(orient2(pos2(a), pos2(b), pos2(c))));
+                        if t == s {
+                            ord = Some(if s > 0 { [0, a, c, b] } else { [0, b, c, a] });
                         }
                     }
                 }
-                if !planar {
+                if ord.is_none() {
+                    let s = t1[at(c, b)];
+                    if s != 0 && t2[at(b, a)] == s && t3[at(a, c)] == s && sign(orient2(pos2(b), pos2(a), pos2(c))) == s {
+                        ord = Some(if s > 0 { [0, b, a, c] } else { [0, c, a, b] });
+                    }
+                }
+                let Some(ord) = ord else { continue };
+                let eid = [at(ord[0], ord[1]), at(ord[1], ord[2]), at(ord[2], ord[3]), at(ord[3], ord[0])];
+                let len = [d[eid[0]], d[eid[1]], d[eid[2]], d[eid[3]]];
+                let lmin = len.iter().copied().fold(f32::INFINITY, f32::min);
+                let lmax = len.iter().copied().fold(0.0f32, f32::max);
+                if lmin.is_nan() || lmin <= 0.0 || lmin < cfg.min_edge_ratio * lmax {
                     continue;
                 }
                 let quad = ord.map(gid);
@@ -407,23 +492,91 @@ fn propose(
                 if lmax > cfg.max_edge_over_spacing * sbar {
                     continue;
                 }
-                let lbar = (g.len[0] + g.len[1] + g.len[2] + g.len[3]) / 4.0;
-                let base = cfg.w_length * (lbar / sbar - 1.0) + cfg.w_shape * (1.0 - g.jacobian);
-                pre.push(Pre { quad, local: [a, b, c], q3, normal: g.normal, len: g.len, base });
+                let ev = [e[eid[0]], e[eid[1]], e[eid[2]], e[eid[3]]];
+                // Corner x: c_x = e_{x−1} × e_x (quad_geom), with the sine and
+                // normal filters applied as soon as the corner is known.
+                let mut cv = [[0.0f32; 3]; 4];
+                let mut cll = [0.0f32; 4];
+                let mut ok = [false; 4];
+                let mut cn = [[0.0f32; 3]; 4];
+                let mut pass = true;
+                for x in 0..4 {
+                    let prev = (x + 3) % 4;
+                    let cc = cross(ev[prev], ev[x]);
+                    let cl = norm(cc);
+                    let ll = len[prev] * len[x];
+                    let sine = if ll > 0.0 && cl > 0.0 {
+                        ok[x] = true;
+                        cn[x] = [cc[0] / cl, cc[1] / cl, cc[2] / cl];
+                        (cl / ll).min(1.0)
+                    } else {
+                        0.0
+                    };
+                    cv[x] = cc;
+                    cll[x] = ll;
+                    if sine < cfg.min_sine || dot(cn[x], np) <= 0.0 {
+                        pass = false;
+                        break;
+                    }
+                    if (0..x).any(|y| dot(cn[y], cn[x]) < cfg.min_normal_dot) {
+                        pass = false;
+                        break;
+                    }
+                }
+                if !pass {
+                    continue;
+                }
+                let q3 = ord.map(pos3);
+                let nd = cross(e[at(ord[0], ord[2])], e[at(ord[1], ord[3])]);
+                let nl = norm(nd);
+                let normal = if nl > 0.0 { [nd[0] / nl, nd[1] / nl, nd[2] / nl] } else { [0.0; 3] };
+                let mut jacobian = f32::INFINITY;
+                for x in 0..4 {
+                    jacobian = if ok[x] {
+                        jacobian.min((dot(cv[x], normal) / cll[x]).clamp(-1.0, 1.0))
+                    } else {
+                        jacobian.min(0.0)
+                    };
+                }
+                let lbar = (len[0] + len[1] + len[2] + len[3]) / 4.0;
+                let base = cfg.w_length * (lbar / sbar - 1.0) + cfg.w_shape * (1.0 - jacobian);
+                sc.pre.push(Pre { quad, local: [a, b, c], q3, normal, len, base });
             }
         }
     }
     // The inside count only adds to the score (its weights are ≥ 0), so candidates are
     // visited by base score and the count is computed only while it can still
     // make the budget: exactly the top `per_point` of the full score, cheaply.
-    pre.sort_unstable_by(|x, y| x.base.total_cmp(&y.base));
+    let strict = !sc.pre.iter().any(|c| c.base.is_nan()) && {
+        let mut dup = false;
+        'outer: for x in 0..w {
+            let px = if x == 0 { p } else { points[nb[x - 1] as usize] };
+            for y in x + 1..w {
+                let py = points[nb[y - 1] as usize];
+                if px.map(f32::to_bits) == py.map(f32::to_bits) {
+                    dup = true;
+                    break 'outer;
+                }
+            }
+        }
+        !dup
+    };
+    sc.keys.clear();
+    if strict {
+        sc.keys.extend(sc.pre.iter().enumerate().map(|(j, c)| (c.base, j as u32)));
+        sc.keys.sort_unstable_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+    } else {
+        sc.pre.sort_unstable_by(|x, y| x.base.total_cmp(&y.base));
+        sc.keys.extend(sc.pre.iter().enumerate().map(|(j, c)| (c.base, j as u32)));
+    }
     let (w_first, w_more) = (cfg.w_inside_first.max(0.0), cfg.w_inside.max(0.0));
-    let mut out: Vec<Kept> = Vec::with_capacity(cfg.per_point + 1);
-    for c in &pre {
+    let out = &mut sc.out;
+    for &(_, j) in &sc.keys {
+        let c = &sc.pre[j as usize];
         if out.len() >= cfg.per_point && c.base > out[out.len() - 1].score {
             break;
         }
-        let inside = inside_count(c, &rel, cfg);
+        let inside = inside_count(c, rel, cfg);
         let score = c.base + w_first * inside.min(1) as f32 + w_more * inside.saturating_sub(1) as f32;
         if out.len() >= cfg.per_point && score > out[out.len() - 1].score {
             continue;
@@ -435,7 +588,6 @@ fn propose(
         out.insert(at, k);
         out.truncate(cfg.per_point);
     }
-    out
 }
 
 /// A candidate of one proposer that passed the filters, before its inside count.
@@ -529,16 +681,26 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
     orient_normals(points, &normal_table, &mut normals);
     let spacing = local_spacing(points, &knn, cfg.spacing_k);
 
-    let per_point: Vec<Vec<Kept>> = crate::par::map(n, |i| propose(i, points, &normals, &spacing, &knn, cfg));
-
-    // (sorted vertex key, canonical cyclic quad, rank, score, inside)
-    let mut all: Vec<Entry> = Vec::new();
-    for list in &per_point {
-        for (r, kp) in list.iter().enumerate() {
-            let mut key = kp.quad;
-            key.sort_unstable();
-            all.push((key, canonical(kp.quad), r.min(u16::MAX as usize) as u16, kp.score, kp.inside));
+    // Proposers in fixed chunks, each with its own reused buffers; entries in point
+    // order, then rank order, whatever the thread count.
+    const CHUNK: usize = 64;
+    let chunks: Vec<Vec<Entry>> = crate::par::map(n.div_ceil(CHUNK), |ch| {
+        let mut sc = Scratch::default();
+        let mut entries: Vec<Entry> = Vec::new();
+        for i in ch * CHUNK..((ch + 1) * CHUNK).min(n) {
+            propose(i, points, &normals, &spacing, &knn, cfg, &mut sc);
+            for (r, kp) in sc.out.iter().enumerate() {
+                let mut key = kp.quad;
+                key.sort_unstable();
+                entries.push((key, canonical(kp.quad), r.min(u16::MAX as usize) as u16, kp.score, kp.inside));
+            }
         }
+        entries
+    });
+    // (sorted vertex key, canonical cyclic quad, rank, score, inside)
+    let mut all: Vec<Entry> = Vec::with_capacity(chunks.iter().map(Vec::len).sum());
+    for c in chunks {
+        all.extend(c);
     }
     // Within a vertex set, the entry with the best (rank, score, orientation) first,
     // so the choice does not depend on the proposer order or thread count.

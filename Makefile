@@ -68,6 +68,7 @@ bench:
 	$(CARGO) bench --bench kdtree
 	$(CARGO) bench --bench face_net
 	$(CARGO) bench --bench kpfcnn
+	$(CARGO) bench --bench candidates
 
 coverage: build
 	$(BIN) coverage-report 2>/dev/null || $(CARGO) test --release --test coverage -- --ignored --nocapture

@@ -361,8 +361,11 @@ struct Scratch {
     t1: Vec<i8>,
     t2: Vec<i8>,
     t3: Vec<i8>,
+    /// Triples past `Local::stage1`.
+    ordered: Vec<Ordered>,
     pre: Vec<Pre>,
-    keys: Vec<(f32, u32)>,
+    keys: Vec<u64>,
+    heap: std::collections::BinaryHeap<std::cmp::Reverse<u64>>,
     out: Vec<Kept>,
 }
 
@@ -377,27 +380,200 @@ fn sign(x: f32) -> i8 {
     }
 }
 
+/// Order-preserving map of a non-NaN `f32` to `u32` (`-0.0` below `+0.0`, as
+/// `total_cmp`), so that (key, index) pairs sort as one `u64`.
+#[inline]
+fn key_bits(x: f32) -> u64 {
+    let b = x.to_bits();
+    (if b >> 31 == 1 { !b } else { b | 0x8000_0000 }) as u64
+}
+
+/// A cyclic order that passed the convexity, edge-ratio and longest-edge filters.
+#[derive(Clone, Copy)]
+struct Ordered {
+    /// Local ids in cyclic order, the proposer (0) first.
+    ord: [usize; 4],
+    /// The triple's local ids, increasing.
+    local: [usize; 3],
+    /// `w_length · (lbar / sbar − 1)`: the base score without its shape term.
+    length_term: f32,
+}
+
+/// The per-proposer tables and the per-triple filters, split in two stages so that
+/// the second (corners, normals, Jacobian) can run lazily.
+struct Local<'a> {
+    i: usize,
+    np: [f32; 3],
+    w: usize,
+    rel: &'a [[f32; 3]],
+    uv: &'a [[f32; 2]],
+    nb: &'a [u32],
+    e: &'a [[f32; 3]],
+    d: &'a [f32],
+    t1: &'a [i8],
+    t2: &'a [i8],
+    t3: &'a [i8],
+    spacing: &'a [f32],
+    cfg: &'a CandidateConfig,
+}
+
+impl Local<'_> {
+    #[inline]
+    fn pos2(&self, l: usize) -> [f32; 2] {
+        if l == 0 {
+            [0.0; 2]
+        } else {
+            self.uv[l - 1]
+        }
+    }
+    #[inline]
+    fn pos3(&self, l: usize) -> [f32; 3] {
+        if l == 0 {
+            [0.0; 3]
+        } else {
+            self.rel[l - 1]
+        }
+    }
+    #[inline]
+    fn gid(&self, l: usize) -> u32 {
+        if l == 0 {
+            self.i as u32
+        } else {
+            self.nb[l - 1]
+        }
+    }
+    #[inline]
+    fn at(&self, x: usize, y: usize) -> usize {
+        x * self.w + y
+    }
+
+    /// The counter-clockwise convex cyclic order of the proposer and neighbours
+    /// a < b < c, if any; then the edge-ratio and longest-edge filters.
+    ///
+    /// The three cyclic orders are tried as [`convex_sign`] did: [0, a, b, c],
+    /// [0, a, c, b], [0, b, a, c]. For an order [0, x, y, z] it tests orient2(z, 0, x),
+    /// (0, x, y), (x, y, z), (y, z, 0): three are tabled per pair, and the triple test
+    /// runs only when they agree.
+    #[inline]
+    fn stage1(&self, a: usize, b: usize, c: usize) -> Option<Ordered> {
+        let (t1, t2, t3) = (self.t1, self.t2, self.t3);
+        let mut ord = None;
+        let mut oabc = None;
+        let s = t1[self.at(c, a)];
+        if s != 0 && t2[self.at(a, b)] == s && t3[self.at(b, c)] == s {
+            let t = sign(orient2(self.pos2(a), self.pos2(b), self.pos2(c)));
+            oabc = Some(t);
+            if t == s {
+                ord = Some(if s > 0 { [0, a, b, c] } else { [0, c, b, a] });
+            }
+        }
+        if ord.is_none() {
+            // orient2(a, c, b) is exactly −orient2(a, b, c) (the same two products,
+            // subtracted the other way round).
+            let s = t1[self.at(b, a)];
+            if s != 0 && t2[self.at(a, c)] == s && t3[self.at(c, b)] == s {
+                let t = -oabc.unwrap_or_else(|| sign(orient2(self.pos2(a), self.pos2(b), self.pos2(c))));
+                if t == s {
+                    ord = Some(if s > 0 { [0, a, c, b] } else { [0, b, c, a] });
+                }
+            }
+        }
+        if ord.is_none() {
+            let s = t1[self.at(c, b)];
+            if s != 0
+                && t2[self.at(b, a)] == s
+                && t3[self.at(a, c)] == s
+                && sign(orient2(self.pos2(b), self.pos2(a), self.pos2(c))) == s
+            {
+                ord = Some(if s > 0 { [0, b, a, c] } else { [0, c, a, b] });
+            }
+        }
+        let ord = ord?;
+        let d = self.d;
+        let len = [
+            d[self.at(ord[0], ord[1])],
+            d[self.at(ord[1], ord[2])],
+            d[self.at(ord[2], ord[3])],
+            d[self.at(ord[3], ord[0])],
+        ];
+        let cfg = self.cfg;
+        let lmin = len.iter().copied().fold(f32::INFINITY, f32::min);
+        let lmax = len.iter().copied().fold(0.0f32, f32::max);
+        if lmin.is_nan() || lmin <= 0.0 || lmin < cfg.min_edge_ratio * lmax {
+            return None;
+        }
+        let quad = ord.map(|l| self.gid(l));
+        let sbar = quad.iter().map(|&v| self.spacing[v as usize]).sum::<f32>() / 4.0;
+        if lmax > cfg.max_edge_over_spacing * sbar {
+            return None;
+        }
+        let lbar = (len[0] + len[1] + len[2] + len[3]) / 4.0;
+        let length_term = cfg.w_length * (lbar / sbar - 1.0);
+        Some(Ordered { ord, local: [a, b, c], length_term })
+    }
+
+    /// The corner sine and normal filters (dropping the triple at the first failed
+    /// corner: the filters are a conjunction, so their order does not matter), then
+    /// the diagonal normal, the Jacobian and the base score, as [`quad_geom`].
+    #[inline]
+    fn stage2(&self, o: &Ordered) -> Option<Pre> {
+        let (ord, cfg, e, d) = (o.ord, self.cfg, self.e, self.d);
+        let eid = [self.at(ord[0], ord[1]), self.at(ord[1], ord[2]), self.at(ord[2], ord[3]), self.at(ord[3], ord[0])];
+        let len = [d[eid[0]], d[eid[1]], d[eid[2]], d[eid[3]]];
+        let ev = [e[eid[0]], e[eid[1]], e[eid[2]], e[eid[3]]];
+        // Corner x: c_x = e_{x−1} × e_x.
+        let mut cv = [[0.0f32; 3]; 4];
+        let mut cll = [0.0f32; 4];
+        let mut ok = [false; 4];
+        let mut cn = [[0.0f32; 3]; 4];
+        for x in 0..4 {
+            let prev = (x + 3) % 4;
+            let cc = cross(ev[prev], ev[x]);
+            let cl = norm(cc);
+            let ll = len[prev] * len[x];
+            let sine = if ll > 0.0 && cl > 0.0 {
+                ok[x] = true;
+                cn[x] = [cc[0] / cl, cc[1] / cl, cc[2] / cl];
+                (cl / ll).min(1.0)
+            } else {
+                0.0
+            };
+            cv[x] = cc;
+            cll[x] = ll;
+            if sine < cfg.min_sine || dot(cn[x], self.np) <= 0.0 {
+                return None;
+            }
+            if (0..x).any(|y| dot(cn[y], cn[x]) < cfg.min_normal_dot) {
+                return None;
+            }
+        }
+        let nd = cross(e[self.at(ord[0], ord[2])], e[self.at(ord[1], ord[3])]);
+        let nl = norm(nd);
+        let normal = if nl > 0.0 { [nd[0] / nl, nd[1] / nl, nd[2] / nl] } else { [0.0; 3] };
+        let mut jacobian = f32::INFINITY;
+        for x in 0..4 {
+            jacobian = if ok[x] {
+                jacobian.min((dot(cv[x], normal) / cll[x]).clamp(-1.0, 1.0))
+            } else {
+                jacobian.min(0.0)
+            };
+        }
+        let base = o.length_term + cfg.w_shape * (1.0 - jacobian);
+        Some(Pre { quad: ord.map(|l| self.gid(l)), local: o.local, q3: ord.map(|l| self.pos3(l)), normal, len, base })
+    }
+}
+
 /// The candidates proposed by point `i`, best first, at most `cfg.per_point`, left in
 /// `sc.out`.
 ///
 /// Equivalent, bit for bit, to the straightforward loop (every triple: try the three
-/// cyclic orders with [`convex_sign`], then [`quad_geom`] and the filters), which it
-/// replaces for speed:
-/// * the four orientation tests of a cyclic order are three proposer/pair tests
-///   (tabled once per proposer) and one triple test, evaluated only when the pair
-///   tests agree; a cyclic order is convex iff all four signs agree and are non-zero;
-/// * edge vectors and lengths come from per-pair tables, so the edge-ratio and
-///   maximum-edge filters run before any per-triple arithmetic;
-/// * corners are computed one at a time and the triple is dropped at the first failed
-///   sine or normal test (the filters are a conjunction, so the order of the tests
-///   does not matter); the diagonal normal and the Jacobian only for survivors.
-///
-/// The budget selection visits the survivors by base score. With no two bit-identical
-/// points among the proposer and its neighbours, the (score, coordinates) order of
-/// kept candidates is strict, so the kept list does not depend on the visiting order
-/// among equal base scores and a small index sort replaces sorting the survivors
-/// themselves; otherwise (duplicates, or a NaN score) the survivors are sorted exactly
-/// as before, so ties resolve as they always did.
+/// cyclic orders with [`convex_sign`], then [`quad_geom`] and the filters, then visit
+/// all survivors sorted by base score), which it replaces for speed: orientation
+/// tests, edge vectors and lengths come from per-pair tables (each entry computed by
+/// the very expression the per-triple code used), the cheap filters run first, and
+/// the corner geometry is computed lazily (see [`select_lazy`]). The exact fallback
+/// [`select_sorted`] is kept for neighbourhoods where the lazy order could change a
+/// tie (bit-identical duplicate points) or a score could be NaN.
 fn propose(
     i: usize,
     points: &[[f32; 3]],
@@ -413,180 +589,174 @@ fn propose(
     let (tu, tv) = tangent_basis(np);
     sc.nb.clear();
     sc.nb.extend(neighbours(knn, n, i, cfg.k));
-    let nb = &sc.nb;
     sc.rel.clear();
-    sc.rel.extend(nb.iter().map(|&j| sub(points[j as usize], p)));
-    let rel = &sc.rel;
+    sc.rel.extend(sc.nb.iter().map(|&j| sub(points[j as usize], p)));
     sc.uv.clear();
-    sc.uv.extend(rel.iter().map(|r| [dot(*r, tu), dot(*r, tv)]));
-    let uv = &sc.uv;
-    let m = nb.len();
+    sc.uv.extend(sc.rel.iter().map(|r| [dot(*r, tu), dot(*r, tv)]));
+    let m = sc.nb.len();
     let w = m + 1;
     sc.pre.clear();
     sc.out.clear();
-    // Local ids: 0 = the proposer, 1 + j = neighbour j.
-    let pos3 = |l: usize| if l == 0 { [0.0f32; 3] } else { rel[l - 1] };
-    let pos2 = |l: usize| if l == 0 { [0.0f32; 2] } else { uv[l - 1] };
-    let gid = |l: usize| if l == 0 { i as u32 } else { nb[l - 1] };
     sc.e.clear();
     sc.d.clear();
     sc.t1.clear();
     sc.t2.clear();
     sc.t3.clear();
-    let o = [0.0f32; 2];
-    for x in 0..w {
-        for y in 0..w {
-            let ev = sub(pos3(y), pos3(x));
-            sc.e.push(ev);
-            sc.d.push(norm(ev));
-            sc.t1.push(sign(orient2(pos2(x), o, pos2(y))));
-            sc.t2.push(sign(orient2(o, pos2(x), pos2(y))));
-            sc.t3.push(sign(orient2(pos2(x), pos2(y), o)));
+    {
+        let pos3 = |l: usize| if l == 0 { [0.0f32; 3] } else { sc.rel[l - 1] };
+        let pos2 = |l: usize| if l == 0 { [0.0f32; 2] } else { sc.uv[l - 1] };
+        let o = [0.0f32; 2];
+        for x in 0..w {
+            for y in 0..w {
+                let ev = sub(pos3(y), pos3(x));
+                sc.e.push(ev);
+                sc.d.push(norm(ev));
+                sc.t1.push(sign(orient2(pos2(x), o, pos2(y))));
+                sc.t2.push(sign(orient2(o, pos2(x), pos2(y))));
+                sc.t3.push(sign(orient2(pos2(x), pos2(y), o)));
+            }
         }
     }
-    let (e, d, t1, t2, t3) = (&sc.e, &sc.d, &sc.t1, &sc.t2, &sc.t3);
-    let at = |x: usize, y: usize| x * w + y;
+    // The lazy selection relies on a strict candidate order and on scores that are
+    // never NaN: no two bit-identical points here, coordinates small enough that no
+    // product overflows (the normalised frame has |x| ≤ 2), finite weights.
+    let bounded = sc.rel.iter().all(|r| r.iter().all(|x| x.abs() <= 1e9));
+    let weights_ok = cfg.w_shape.is_finite()
+        && cfg.w_shape >= 0.0
+        && cfg.w_inside_first.is_finite()
+        && cfg.w_inside.is_finite();
+    let distinct = || {
+        for x in 0..w {
+            let px = if x == 0 { p } else { points[sc.nb[x - 1] as usize] };
+            for y in x + 1..w {
+                if px.map(f32::to_bits) == points[sc.nb[y - 1] as usize].map(f32::to_bits) {
+                    return false;
+                }
+            }
+        }
+        true
+    };
+    let lazy = bounded && weights_ok && distinct();
+    let loc = Local {
+        i,
+        np,
+        w,
+        rel: &sc.rel,
+        uv: &sc.uv,
+        nb: &sc.nb,
+        e: &sc.e,
+        d: &sc.d,
+        t1: &sc.t1,
+        t2: &sc.t2,
+        t3: &sc.t3,
+        spacing,
+        cfg,
+    };
+    sc.ordered.clear();
     for a in 1..=m {
         for b in a + 1..=m {
             for c in b + 1..=m {
-                // The three cyclic orders, tried in this order, as before:
-                // [0, a, b, c], [0, a, c, b], [0, b, a, c]. For an order [0, x, y, z]
-                // convex_sign tests orient2(z, 0, x), (0, x, y), (x, y, z), (y, z, 0).
-                let mut ord = None;
-                let mut oabc = None;
-                let s = t1[at(c, a)];
-                if s != 0 && t2[at(a, b)] == s && t3[at(b, c)] == s {
-                    let t = sign(orient2(pos2(a), pos2(b), pos2(c)));
-                    oabc = Some(t);
-                    if t == s {
-                        ord = Some(if s > 0 { [0, a, b, c] } else { [0, c, b, a] });
-                    }
+                if let Some(o) = loc.stage1(a, b, c) {
+                    sc.ordered.push(o);
                 }
-                if ord.is_none() {
-                    // orient2(a, c, b) is exactly −orient2(a, b, c) (the same two
-                    // products, subtracted the other way round).
-                    let s = t1[at(b, a)];
-                    if s != 0 && t2[at(a, c)] == s && t3[at(c, b)] == s {
-                        let t = -oabc.unwrap_or_else(|| sign(orient2(pos2(a), pos2(b), pos2(c))));
-                        if t == s {
-                            ord = Some(if s > 0 { [0, a, c, b] } else { [0, b, c, a] });
-                        }
-                    }
-                }
-                if ord.is_none() {
-                    let s = t1[at(c, b)];
-                    if s != 0 && t2[at(b, a)] == s && t3[at(a, c)] == s && sign(orient2(pos2(b), pos2(a), pos2(c))) == s {
-                        ord = Some(if s > 0 { [0, b, a, c] } else { [0, c, a, b] });
-                    }
-                }
-                let Some(ord) = ord else { continue };
-                let eid = [at(ord[0], ord[1]), at(ord[1], ord[2]), at(ord[2], ord[3]), at(ord[3], ord[0])];
-                let len = [d[eid[0]], d[eid[1]], d[eid[2]], d[eid[3]]];
-                let lmin = len.iter().copied().fold(f32::INFINITY, f32::min);
-                let lmax = len.iter().copied().fold(0.0f32, f32::max);
-                if lmin.is_nan() || lmin <= 0.0 || lmin < cfg.min_edge_ratio * lmax {
-                    continue;
-                }
-                let quad = ord.map(gid);
-                let sbar = quad.iter().map(|&v| spacing[v as usize]).sum::<f32>() / 4.0;
-                if lmax > cfg.max_edge_over_spacing * sbar {
-                    continue;
-                }
-                let ev = [e[eid[0]], e[eid[1]], e[eid[2]], e[eid[3]]];
-                // Corner x: c_x = e_{x−1} × e_x (quad_geom), with the sine and
-                // normal filters applied as soon as the corner is known.
-                let mut cv = [[0.0f32; 3]; 4];
-                let mut cll = [0.0f32; 4];
-                let mut ok = [false; 4];
-                let mut cn = [[0.0f32; 3]; 4];
-                let mut pass = true;
-                for x in 0..4 {
-                    let prev = (x + 3) % 4;
-                    let cc = cross(ev[prev], ev[x]);
-                    let cl = norm(cc);
-                    let ll = len[prev] * len[x];
-                    let sine = if ll > 0.0 && cl > 0.0 {
-                        ok[x] = true;
-                        cn[x] = [cc[0] / cl, cc[1] / cl, cc[2] / cl];
-                        (cl / ll).min(1.0)
-                    } else {
-                        0.0
-                    };
-                    cv[x] = cc;
-                    cll[x] = ll;
-                    if sine < cfg.min_sine || dot(cn[x], np) <= 0.0 {
-                        pass = false;
-                        break;
-                    }
-                    if (0..x).any(|y| dot(cn[y], cn[x]) < cfg.min_normal_dot) {
-                        pass = false;
-                        break;
-                    }
-                }
-                if !pass {
-                    continue;
-                }
-                let q3 = ord.map(pos3);
-                let nd = cross(e[at(ord[0], ord[2])], e[at(ord[1], ord[3])]);
-                let nl = norm(nd);
-                let normal = if nl > 0.0 { [nd[0] / nl, nd[1] / nl, nd[2] / nl] } else { [0.0; 3] };
-                let mut jacobian = f32::INFINITY;
-                for x in 0..4 {
-                    jacobian = if ok[x] {
-                        jacobian.min((dot(cv[x], normal) / cll[x]).clamp(-1.0, 1.0))
-                    } else {
-                        jacobian.min(0.0)
-                    };
-                }
-                let lbar = (len[0] + len[1] + len[2] + len[3]) / 4.0;
-                let base = cfg.w_length * (lbar / sbar - 1.0) + cfg.w_shape * (1.0 - jacobian);
-                sc.pre.push(Pre { quad, local: [a, b, c], q3, normal, len, base });
             }
         }
     }
-    // The inside count only adds to the score (its weights are ≥ 0), so candidates are
-    // visited by base score and the count is computed only while it can still
-    // make the budget: exactly the top `per_point` of the full score, cheaply.
-    let strict = !sc.pre.iter().any(|c| c.base.is_nan()) && {
-        let mut dup = false;
-        'outer: for x in 0..w {
-            let px = if x == 0 { p } else { points[nb[x - 1] as usize] };
-            for y in x + 1..w {
-                let py = points[nb[y - 1] as usize];
-                if px.map(f32::to_bits) == py.map(f32::to_bits) {
-                    dup = true;
-                    break 'outer;
-                }
-            }
-        }
-        !dup
-    };
-    sc.keys.clear();
-    if strict {
-        sc.keys.extend(sc.pre.iter().enumerate().map(|(j, c)| (c.base, j as u32)));
-        sc.keys.sort_unstable_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+    if lazy && sc.ordered.iter().all(|o| !o.length_term.is_nan()) {
+        select_lazy(&loc, points, &sc.ordered, &mut sc.keys, &mut sc.heap, &mut sc.pre, &mut sc.out);
     } else {
-        sc.pre.sort_unstable_by(|x, y| x.base.total_cmp(&y.base));
-        sc.keys.extend(sc.pre.iter().enumerate().map(|(j, c)| (c.base, j as u32)));
+        sc.pre.extend(sc.ordered.iter().filter_map(|o| loc.stage2(o)));
+        select_sorted(&loc, points, &mut sc.pre, &mut sc.out);
     }
+}
+
+/// Inserts a scored candidate into the kept list (best first, ties by coordinates),
+/// keeping at most `per_point`.
+#[inline]
+fn keep(out: &mut Vec<Kept>, points: &[[f32; 3]], k: Kept, per_point: usize) {
+    let at = out.partition_point(|o| {
+        o.score.total_cmp(&k.score).then_with(|| coord_order(points, &o.quad, &k.quad)).is_lt()
+    });
+    out.insert(at, k);
+    out.truncate(per_point);
+}
+
+/// The kept list from all filter survivors sorted by base score. The inside count
+/// only adds to the score (its weights are ≥ 0), so candidates are visited by base
+/// score and the count is computed only while it can still make the budget.
+fn select_sorted(loc: &Local<'_>, points: &[[f32; 3]], pre: &mut [Pre], out: &mut Vec<Kept>) {
+    let cfg = loc.cfg;
+    pre.sort_unstable_by(|x, y| x.base.total_cmp(&y.base));
     let (w_first, w_more) = (cfg.w_inside_first.max(0.0), cfg.w_inside.max(0.0));
-    let out = &mut sc.out;
-    for &(_, j) in &sc.keys {
-        let c = &sc.pre[j as usize];
+    for c in pre.iter() {
         if out.len() >= cfg.per_point && c.base > out[out.len() - 1].score {
             break;
         }
-        let inside = inside_count(c, rel, cfg);
+        let inside = inside_count(c, loc.rel, cfg);
         let score = c.base + w_first * inside.min(1) as f32 + w_more * inside.saturating_sub(1) as f32;
         if out.len() >= cfg.per_point && score > out[out.len() - 1].score {
             continue;
         }
-        let k = Kept { quad: c.quad, score, inside };
-        let at = out.partition_point(|o| {
-            o.score.total_cmp(&score).then_with(|| coord_order(points, &o.quad, &k.quad)).is_lt()
-        });
-        out.insert(at, k);
-        out.truncate(cfg.per_point);
+        keep(out, points, Kept { quad: c.quad, score, inside }, cfg.per_point);
+    }
+}
+
+/// The same kept list as [`select_sorted`], computing less: `length_term` is a lower
+/// bound of the base score (the shape term `w_shape · (1 − J)` is ≥ 0), and the base
+/// score one of the full score, so candidates are taken best bound first (from the
+/// bound-sorted list or a heap of evaluated base scores) and nothing is evaluated once
+/// every remaining bound exceeds the worst kept score. Without NaN scores and with no
+/// two candidates of equal (score, coordinates) — the caller checks both — the kept
+/// list is the top `per_point` of a strict order, whatever the visiting order.
+fn select_lazy(
+    loc: &Local<'_>,
+    points: &[[f32; 3]],
+    ordered: &[Ordered],
+    keys: &mut Vec<u64>,
+    heap: &mut std::collections::BinaryHeap<std::cmp::Reverse<u64>>,
+    pre: &mut Vec<Pre>,
+    out: &mut Vec<Kept>,
+) {
+    let cfg = loc.cfg;
+    let (w_first, w_more) = (cfg.w_inside_first.max(0.0), cfg.w_inside.max(0.0));
+    keys.clear();
+    keys.extend(ordered.iter().enumerate().map(|(j, o)| key_bits(o.length_term) << 32 | j as u64));
+    keys.sort_unstable();
+    heap.clear();
+    let mut li = 0;
+    loop {
+        let next_bound = keys.get(li).copied();
+        let next_base = heap.peek().map(|r| r.0);
+        let take_bound = match (next_bound, next_base) {
+            (None, None) => break,
+            (Some(_), None) => true,
+            (None, Some(_)) => false,
+            (Some(b), Some(h)) => b < h,
+        };
+        let full = out.len() >= cfg.per_point;
+        if take_bound {
+            let o = &ordered[(next_bound.unwrap_or(0) & 0xffff_ffff) as usize];
+            if full && o.length_term > out[out.len() - 1].score {
+                break;
+            }
+            li += 1;
+            if let Some(c) = loc.stage2(o) {
+                heap.push(std::cmp::Reverse(key_bits(c.base) << 32 | pre.len() as u64));
+                pre.push(c);
+            }
+        } else {
+            heap.pop();
+            let c = &pre[(next_base.unwrap_or(0) & 0xffff_ffff) as usize];
+            if full && c.base > out[out.len() - 1].score {
+                break;
+            }
+            let inside = inside_count(c, loc.rel, cfg);
+            let score = c.base + w_first * inside.min(1) as f32 + w_more * inside.saturating_sub(1) as f32;
+            if full && score > out[out.len() - 1].score {
+                continue;
+            }
+            keep(out, points, Kept { quad: c.quad, score, inside }, cfg.per_point);
+        }
     }
 }
 

@@ -721,10 +721,24 @@ fn select_lazy(
     let (w_first, w_more) = (cfg.w_inside_first.max(0.0), cfg.w_inside.max(0.0));
     keys.clear();
     keys.extend(ordered.iter().enumerate().map(|(j, o)| key_bits(o.length_term) << 32 | j as u64));
-    keys.sort_unstable();
+    // Usually only the best few hundred bounds are visited: sort those first and the
+    // rest only if the walk gets there.
+    let mut sorted_upto = keys.len();
+    let head = 8 * cfg.per_point.max(1);
+    if keys.len() > head + 1 {
+        keys.select_nth_unstable(head);
+        keys[..head].sort_unstable();
+        sorted_upto = head + 1;
+    } else {
+        keys.sort_unstable();
+    }
     heap.clear();
     let mut li = 0;
     loop {
+        if li == sorted_upto && li < keys.len() {
+            keys[li..].sort_unstable();
+            sorted_upto = keys.len();
+        }
         let next_bound = keys.get(li).copied();
         let next_base = heap.peek().map(|r| r.0);
         let take_bound = match (next_bound, next_base) {
@@ -923,6 +937,120 @@ mod tests {
             }
         }
         v
+    }
+
+    /// The straightforward per-proposer selection `propose` must reproduce bit for bit:
+    /// every triple, the three cyclic orders through `convex_sign`, `quad_geom` and the
+    /// filters, all survivors sorted by base score.
+    fn propose_reference(
+        i: usize,
+        points: &[[f32; 3]],
+        c: &Candidates,
+        cfg: &CandidateConfig,
+    ) -> Vec<Kept> {
+        let n = points.len();
+        let (p, np) = (points[i], c.normals[i]);
+        let (tu, tv) = tangent_basis(np);
+        let nb: Vec<u32> = neighbours(&c.knn, n, i, cfg.k).collect();
+        let rel: Vec<[f32; 3]> = nb.iter().map(|&j| sub(points[j as usize], p)).collect();
+        let uv: Vec<[f32; 2]> = rel.iter().map(|r| [dot(*r, tu), dot(*r, tv)]).collect();
+        let pos3 = |l: usize| if l == 0 { [0.0f32; 3] } else { rel[l - 1] };
+        let pos2 = |l: usize| if l == 0 { [0.0f32; 2] } else { uv[l - 1] };
+        let gid = |l: usize| if l == 0 { i as u32 } else { nb[l - 1] };
+        let m = nb.len();
+        let mut pre = Vec::new();
+        for a in 1..=m {
+            for b in a + 1..=m {
+                for cc in b + 1..=m {
+                    let mut order = None;
+                    for cand in [[0, a, b, cc], [0, a, cc, b], [0, b, a, cc]] {
+                        let s = convex_sign(cand.map(pos2));
+                        if s != 0 {
+                            order = Some(if s > 0 { cand } else { [cand[0], cand[3], cand[2], cand[1]] });
+                            break;
+                        }
+                    }
+                    let Some(ord) = order else { continue };
+                    let q3 = ord.map(pos3);
+                    let g = quad_geom(q3);
+                    let lmin = g.len.iter().copied().fold(f32::INFINITY, f32::min);
+                    let lmax = g.len.iter().copied().fold(0.0f32, f32::max);
+                    if lmin.is_nan() || lmin <= 0.0 || lmin < cfg.min_edge_ratio * lmax {
+                        continue;
+                    }
+                    if g.sine.iter().any(|&s| s < cfg.min_sine) {
+                        continue;
+                    }
+                    let planar = (0..4).all(|x| {
+                        dot(g.corner_normal[x], np) > 0.0
+                            && (x + 1..4).all(|y| dot(g.corner_normal[x], g.corner_normal[y]) >= cfg.min_normal_dot)
+                    });
+                    if !planar {
+                        continue;
+                    }
+                    let quad = ord.map(gid);
+                    let sbar = quad.iter().map(|&v| c.spacing[v as usize]).sum::<f32>() / 4.0;
+                    if lmax > cfg.max_edge_over_spacing * sbar {
+                        continue;
+                    }
+                    let lbar = (g.len[0] + g.len[1] + g.len[2] + g.len[3]) / 4.0;
+                    let base = cfg.w_length * (lbar / sbar - 1.0) + cfg.w_shape * (1.0 - g.jacobian);
+                    pre.push(Pre { quad, local: [a, b, cc], q3, normal: g.normal, len: g.len, base });
+                }
+            }
+        }
+        pre.sort_unstable_by(|x, y| x.base.total_cmp(&y.base));
+        let (w_first, w_more) = (cfg.w_inside_first.max(0.0), cfg.w_inside.max(0.0));
+        let mut out: Vec<Kept> = Vec::new();
+        for q in &pre {
+            if out.len() >= cfg.per_point && q.base > out[out.len() - 1].score {
+                break;
+            }
+            let inside = inside_count(q, &rel, cfg);
+            let score = q.base + w_first * inside.min(1) as f32 + w_more * inside.saturating_sub(1) as f32;
+            if out.len() >= cfg.per_point && score > out[out.len() - 1].score {
+                continue;
+            }
+            let k = Kept { quad: q.quad, score, inside };
+            let at = out.partition_point(|o| {
+                o.score.total_cmp(&score).then_with(|| coord_order(points, &o.quad, &k.quad)).is_lt()
+            });
+            out.insert(at, k);
+            out.truncate(cfg.per_point);
+        }
+        out
+    }
+
+    #[test]
+    fn propose_matches_the_straightforward_reference_bit_for_bit() {
+        let mut rng = crate::rng::Rng::new(3);
+        // A noisy bumpy sheet, a random blob (many non-convex and sliver triples), and
+        // a lattice with duplicated points (the exact tie-keeping path).
+        let sheet: Vec<[f32; 3]> = (0..120)
+            .map(|i| {
+                let (x, y) = ((i % 12) as f32 * 0.1, (i / 12) as f32 * 0.1);
+                [x + 0.03 * rng.f32(), y + 0.03 * rng.f32(), 0.1 * (3.0 * x).sin() * y + 0.01 * rng.f32()]
+            })
+            .collect();
+        let blob: Vec<[f32; 3]> = (0..80).map(|_| [rng.f32(), rng.f32(), 0.3 * rng.f32()]).collect();
+        let mut dup = grid(5, 5, 0.0);
+        dup.extend(grid(5, 5, 0.0));
+        for (pts, k, per_point) in [(&sheet, 20, 32), (&sheet, 10, 4), (&blob, 14, 6), (&dup, 12, 8)] {
+            let cfg = CandidateConfig { k, per_point, ..CandidateConfig::default() };
+            let c = generate(pts, &cfg).unwrap();
+            let mut sc = Scratch::default();
+            let mut total = 0;
+            for i in 0..pts.len() {
+                propose(i, pts, &c.normals, &c.spacing, &c.knn, &cfg, &mut sc);
+                let want = propose_reference(i, pts, &c, &cfg);
+                assert_eq!(sc.out.len(), want.len(), "point {i}");
+                for (g, w) in sc.out.iter().zip(&want) {
+                    assert_eq!((g.quad, g.score.to_bits(), g.inside), (w.quad, w.score.to_bits(), w.inside), "point {i}");
+                }
+                total += want.len();
+            }
+            assert!(total > 0, "the reference kept nothing: the comparison would be empty");
+        }
     }
 
     #[test]

@@ -34,7 +34,8 @@ fn main() {
     let mut cloud = mesh.vertices.clone();
     cloud.extend(noise_points(&mesh, &NoiseConfig::default(), &mut rng).expect("bench: noise points"));
     if let Ok(path) = std::env::var("CANDIDATES_BENCH_XYZ") {
-        point2quad::io::points::write_points_xyz(std::path::Path::new(&path), &cloud).expect("bench: write cloud");
+        point2quad::io::points::write_points_xyz(std::path::Path::new(&path), &cloud)
+            .expect("bench: write cloud");
     }
     let frame = Frame::fit(&cloud).expect("bench: frame");
     let points = frame.to_local_all(&cloud);

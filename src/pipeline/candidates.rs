@@ -518,7 +518,12 @@ impl Local<'_> {
     #[inline]
     fn stage2(&self, o: &Ordered) -> Option<Pre> {
         let (ord, cfg, e, d) = (o.ord, self.cfg, self.e, self.d);
-        let eid = [self.at(ord[0], ord[1]), self.at(ord[1], ord[2]), self.at(ord[2], ord[3]), self.at(ord[3], ord[0])];
+        let eid = [
+            self.at(ord[0], ord[1]),
+            self.at(ord[1], ord[2]),
+            self.at(ord[2], ord[3]),
+            self.at(ord[3], ord[0]),
+        ];
         let len = [d[eid[0]], d[eid[1]], d[eid[2]], d[eid[3]]];
         let ev = [e[eid[0]], e[eid[1]], e[eid[2]], e[eid[3]]];
         // Corner x: c_x = e_{x−1} × e_x.
@@ -559,7 +564,14 @@ impl Local<'_> {
             };
         }
         let base = o.length_term + cfg.w_shape * (1.0 - jacobian);
-        Some(Pre { quad: ord.map(|l| self.gid(l)), local: o.local, q3: ord.map(|l| self.pos3(l)), normal, len, base })
+        Some(Pre {
+            quad: ord.map(|l| self.gid(l)),
+            local: o.local,
+            q3: ord.map(|l| self.pos3(l)),
+            normal,
+            len,
+            base,
+        })
     }
 }
 
@@ -942,12 +954,7 @@ mod tests {
     /// The straightforward per-proposer selection `propose` must reproduce bit for bit:
     /// every triple, the three cyclic orders through `convex_sign`, `quad_geom` and the
     /// filters, all survivors sorted by base score.
-    fn propose_reference(
-        i: usize,
-        points: &[[f32; 3]],
-        c: &Candidates,
-        cfg: &CandidateConfig,
-    ) -> Vec<Kept> {
+    fn propose_reference(i: usize, points: &[[f32; 3]], c: &Candidates, cfg: &CandidateConfig) -> Vec<Kept> {
         let n = points.len();
         let (p, np) = (points[i], c.normals[i]);
         let (tu, tv) = tangent_basis(np);
@@ -983,7 +990,8 @@ mod tests {
                     }
                     let planar = (0..4).all(|x| {
                         dot(g.corner_normal[x], np) > 0.0
-                            && (x + 1..4).all(|y| dot(g.corner_normal[x], g.corner_normal[y]) >= cfg.min_normal_dot)
+                            && (x + 1..4)
+                                .all(|y| dot(g.corner_normal[x], g.corner_normal[y]) >= cfg.min_normal_dot)
                     });
                     if !planar {
                         continue;
@@ -1045,7 +1053,11 @@ mod tests {
                 let want = propose_reference(i, pts, &c, &cfg);
                 assert_eq!(sc.out.len(), want.len(), "point {i}");
                 for (g, w) in sc.out.iter().zip(&want) {
-                    assert_eq!((g.quad, g.score.to_bits(), g.inside), (w.quad, w.score.to_bits(), w.inside), "point {i}");
+                    assert_eq!(
+                        (g.quad, g.score.to_bits(), g.inside),
+                        (w.quad, w.score.to_bits(), w.inside),
+                        "point {i}"
+                    );
                 }
                 total += want.len();
             }

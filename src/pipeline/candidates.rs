@@ -299,6 +299,7 @@ fn orient2(a: [f32; 2], b: [f32; 2], c: [f32; 2]) -> f32 {
     (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
 }
 
+#[cfg(test)]
 /// +1 if the 2-D polygon is strictly convex counter-clockwise, −1 clockwise, 0 otherwise.
 #[inline]
 fn convex_sign(q: [[f32; 2]; 4]) -> i32 {
@@ -341,7 +342,250 @@ fn coord_order(points: &[[f32; 3]], a: &[u32; 4], b: &[u32; 4]) -> std::cmp::Ord
     std::cmp::Ordering::Equal
 }
 
-/// The candidates proposed by point `i`, best first, at most `cfg.per_point`.
+/// Per-thread buffers of [`propose`], reused from one proposer to the next.
+///
+/// The per-pair tables are over local ids (0 = the proposer, 1 + j = neighbour j),
+/// row-major with `w = m + 1` columns. Every entry is computed with exactly the
+/// expression the per-triple code used before it was tabled (same operands, same
+/// order), so the filters see bit-identical values.
+#[derive(Default)]
+struct Scratch {
+    nb: Vec<u32>,
+    rel: Vec<[f32; 3]>,
+    uv: Vec<[f32; 2]>,
+    /// `e[x·w + y] = pos3(y) − pos3(x)`: the edge vector from x to y.
+    e: Vec<[f32; 3]>,
+    /// `d[x·w + y] = |e[x·w + y]|`.
+    d: Vec<f32>,
+    /// Signs of `orient2(x, 0, y)`, `orient2(0, x, y)`, `orient2(x, y, 0)`.
+    t1: Vec<i8>,
+    t2: Vec<i8>,
+    t3: Vec<i8>,
+    /// Triples past `Local::stage1`.
+    ordered: Vec<Ordered>,
+    pre: Vec<Pre>,
+    keys: Vec<u64>,
+    heap: std::collections::BinaryHeap<std::cmp::Reverse<u64>>,
+    out: Vec<Kept>,
+}
+
+#[inline]
+fn sign(x: f32) -> i8 {
+    if x > 0.0 {
+        1
+    } else if x < 0.0 {
+        -1
+    } else {
+        0
+    }
+}
+
+/// Order-preserving map of a non-NaN `f32` to `u32` (`-0.0` below `+0.0`, as
+/// `total_cmp`), so that (key, index) pairs sort as one `u64`.
+#[inline]
+fn key_bits(x: f32) -> u64 {
+    let b = x.to_bits();
+    (if b >> 31 == 1 { !b } else { b | 0x8000_0000 }) as u64
+}
+
+/// A cyclic order that passed the convexity, edge-ratio and longest-edge filters.
+#[derive(Clone, Copy)]
+struct Ordered {
+    /// Local ids in cyclic order, the proposer (0) first.
+    ord: [usize; 4],
+    /// The triple's local ids, increasing.
+    local: [usize; 3],
+    /// `w_length · (lbar / sbar − 1)`: the base score without its shape term.
+    length_term: f32,
+}
+
+/// The per-proposer tables and the per-triple filters, split in two stages so that
+/// the second (corners, normals, Jacobian) can run lazily.
+struct Local<'a> {
+    i: usize,
+    np: [f32; 3],
+    w: usize,
+    rel: &'a [[f32; 3]],
+    uv: &'a [[f32; 2]],
+    nb: &'a [u32],
+    e: &'a [[f32; 3]],
+    d: &'a [f32],
+    t1: &'a [i8],
+    t2: &'a [i8],
+    t3: &'a [i8],
+    spacing: &'a [f32],
+    cfg: &'a CandidateConfig,
+}
+
+impl Local<'_> {
+    #[inline]
+    fn pos2(&self, l: usize) -> [f32; 2] {
+        if l == 0 {
+            [0.0; 2]
+        } else {
+            self.uv[l - 1]
+        }
+    }
+    #[inline]
+    fn pos3(&self, l: usize) -> [f32; 3] {
+        if l == 0 {
+            [0.0; 3]
+        } else {
+            self.rel[l - 1]
+        }
+    }
+    #[inline]
+    fn gid(&self, l: usize) -> u32 {
+        if l == 0 {
+            self.i as u32
+        } else {
+            self.nb[l - 1]
+        }
+    }
+    #[inline]
+    fn at(&self, x: usize, y: usize) -> usize {
+        x * self.w + y
+    }
+
+    /// The counter-clockwise convex cyclic order of the proposer and neighbours
+    /// a < b < c, if any; then the edge-ratio and longest-edge filters.
+    ///
+    /// The three cyclic orders are tried as [`convex_sign`] did: [0, a, b, c],
+    /// [0, a, c, b], [0, b, a, c]. For an order [0, x, y, z] it tests orient2(z, 0, x),
+    /// (0, x, y), (x, y, z), (y, z, 0): three are tabled per pair, and the triple test
+    /// runs only when they agree.
+    #[inline]
+    fn stage1(&self, a: usize, b: usize, c: usize) -> Option<Ordered> {
+        let (t1, t2, t3) = (self.t1, self.t2, self.t3);
+        let mut ord = None;
+        let mut oabc = None;
+        let s = t1[self.at(c, a)];
+        if s != 0 && t2[self.at(a, b)] == s && t3[self.at(b, c)] == s {
+            let t = sign(orient2(self.pos2(a), self.pos2(b), self.pos2(c)));
+            oabc = Some(t);
+            if t == s {
+                ord = Some(if s > 0 { [0, a, b, c] } else { [0, c, b, a] });
+            }
+        }
+        if ord.is_none() {
+            // orient2(a, c, b) is exactly −orient2(a, b, c) (the same two products,
+            // subtracted the other way round).
+            let s = t1[self.at(b, a)];
+            if s != 0 && t2[self.at(a, c)] == s && t3[self.at(c, b)] == s {
+                let t = -oabc.unwrap_or_else(|| sign(orient2(self.pos2(a), self.pos2(b), self.pos2(c))));
+                if t == s {
+                    ord = Some(if s > 0 { [0, a, c, b] } else { [0, b, c, a] });
+                }
+            }
+        }
+        if ord.is_none() {
+            let s = t1[self.at(c, b)];
+            if s != 0
+                && t2[self.at(b, a)] == s
+                && t3[self.at(a, c)] == s
+                && sign(orient2(self.pos2(b), self.pos2(a), self.pos2(c))) == s
+            {
+                ord = Some(if s > 0 { [0, b, a, c] } else { [0, c, a, b] });
+            }
+        }
+        let ord = ord?;
+        let d = self.d;
+        let len = [
+            d[self.at(ord[0], ord[1])],
+            d[self.at(ord[1], ord[2])],
+            d[self.at(ord[2], ord[3])],
+            d[self.at(ord[3], ord[0])],
+        ];
+        let cfg = self.cfg;
+        let lmin = len.iter().copied().fold(f32::INFINITY, f32::min);
+        let lmax = len.iter().copied().fold(0.0f32, f32::max);
+        if lmin.is_nan() || lmin <= 0.0 || lmin < cfg.min_edge_ratio * lmax {
+            return None;
+        }
+        let quad = ord.map(|l| self.gid(l));
+        let sbar = quad.iter().map(|&v| self.spacing[v as usize]).sum::<f32>() / 4.0;
+        if lmax > cfg.max_edge_over_spacing * sbar {
+            return None;
+        }
+        let lbar = (len[0] + len[1] + len[2] + len[3]) / 4.0;
+        let length_term = cfg.w_length * (lbar / sbar - 1.0);
+        Some(Ordered { ord, local: [a, b, c], length_term })
+    }
+
+    /// The corner sine and normal filters (dropping the triple at the first failed
+    /// corner: the filters are a conjunction, so their order does not matter), then
+    /// the diagonal normal, the Jacobian and the base score, as [`quad_geom`].
+    #[inline]
+    fn stage2(&self, o: &Ordered) -> Option<Pre> {
+        let (ord, cfg, e, d) = (o.ord, self.cfg, self.e, self.d);
+        let eid = [
+            self.at(ord[0], ord[1]),
+            self.at(ord[1], ord[2]),
+            self.at(ord[2], ord[3]),
+            self.at(ord[3], ord[0]),
+        ];
+        let len = [d[eid[0]], d[eid[1]], d[eid[2]], d[eid[3]]];
+        let ev = [e[eid[0]], e[eid[1]], e[eid[2]], e[eid[3]]];
+        // Corner x: c_x = e_{x−1} × e_x.
+        let mut cv = [[0.0f32; 3]; 4];
+        let mut cll = [0.0f32; 4];
+        let mut ok = [false; 4];
+        let mut cn = [[0.0f32; 3]; 4];
+        for x in 0..4 {
+            let prev = (x + 3) % 4;
+            let cc = cross(ev[prev], ev[x]);
+            let cl = norm(cc);
+            let ll = len[prev] * len[x];
+            let sine = if ll > 0.0 && cl > 0.0 {
+                ok[x] = true;
+                cn[x] = [cc[0] / cl, cc[1] / cl, cc[2] / cl];
+                (cl / ll).min(1.0)
+            } else {
+                0.0
+            };
+            cv[x] = cc;
+            cll[x] = ll;
+            if sine < cfg.min_sine || dot(cn[x], self.np) <= 0.0 {
+                return None;
+            }
+            if (0..x).any(|y| dot(cn[y], cn[x]) < cfg.min_normal_dot) {
+                return None;
+            }
+        }
+        let nd = cross(e[self.at(ord[0], ord[2])], e[self.at(ord[1], ord[3])]);
+        let nl = norm(nd);
+        let normal = if nl > 0.0 { [nd[0] / nl, nd[1] / nl, nd[2] / nl] } else { [0.0; 3] };
+        let mut jacobian = f32::INFINITY;
+        for x in 0..4 {
+            jacobian = if ok[x] {
+                jacobian.min((dot(cv[x], normal) / cll[x]).clamp(-1.0, 1.0))
+            } else {
+                jacobian.min(0.0)
+            };
+        }
+        let base = o.length_term + cfg.w_shape * (1.0 - jacobian);
+        Some(Pre {
+            quad: ord.map(|l| self.gid(l)),
+            local: o.local,
+            q3: ord.map(|l| self.pos3(l)),
+            normal,
+            len,
+            base,
+        })
+    }
+}
+
+/// The candidates proposed by point `i`, best first, at most `cfg.per_point`, left in
+/// `sc.out`.
+///
+/// Equivalent, bit for bit, to the straightforward loop (every triple: try the three
+/// cyclic orders with [`convex_sign`], then [`quad_geom`] and the filters, then visit
+/// all survivors sorted by base score), which it replaces for speed: orientation
+/// tests, edge vectors and lengths come from per-pair tables (each entry computed by
+/// the very expression the per-triple code used), the cheap filters run first, and
+/// the corner geometry is computed lazily (see [`select_lazy`]). The exact fallback
+/// [`select_sorted`] is kept for neighbourhoods where the lazy order could change a
+/// tie (bit-identical duplicate points) or a score could be NaN.
 fn propose(
     i: usize,
     points: &[[f32; 3]],
@@ -349,93 +593,197 @@ fn propose(
     spacing: &[f32],
     knn: &KnnTable,
     cfg: &CandidateConfig,
-) -> Vec<Kept> {
+    sc: &mut Scratch,
+) {
     let n = points.len();
     let p = points[i];
     let np = normals[i];
     let (tu, tv) = tangent_basis(np);
-    let nb: Vec<u32> = neighbours(knn, n, i, cfg.k).collect();
-    let rel: Vec<[f32; 3]> = nb.iter().map(|&j| sub(points[j as usize], p)).collect();
-    let uv: Vec<[f32; 2]> = rel.iter().map(|r| [dot(*r, tu), dot(*r, tv)]).collect();
-    let m = nb.len();
-    let mut pre: Vec<Pre> = Vec::new();
-    // Local ids: 0 = the proposer, 1 + j = neighbour j.
-    let pos3 = |l: usize| if l == 0 { [0.0f32; 3] } else { rel[l - 1] };
-    let pos2 = |l: usize| if l == 0 { [0.0f32; 2] } else { uv[l - 1] };
-    let gid = |l: usize| if l == 0 { i as u32 } else { nb[l - 1] };
-    for a in 1..=m {
-        for b in a + 1..=m {
-            for c in b + 1..=m {
-                let mut order = None;
-                for cand in [[0, a, b, c], [0, a, c, b], [0, b, a, c]] {
-                    let s = convex_sign(cand.map(pos2));
-                    if s > 0 {
-                        order = Some(cand);
-                        break;
-                    } else if s < 0 {
-                        order = Some([cand[0], cand[3], cand[2], cand[1]]);
-                        break;
-                    }
-                }
-                let Some(ord) = order else { continue };
-                let q3 = ord.map(pos3);
-                let g = quad_geom(q3);
-                let lmin = g.len.iter().copied().fold(f32::INFINITY, f32::min);
-                let lmax = g.len.iter().copied().fold(0.0f32, f32::max);
-                if lmin.is_nan() || lmin <= 0.0 || lmin < cfg.min_edge_ratio * lmax {
-                    continue;
-                }
-                if g.sine.iter().any(|&s| s < cfg.min_sine) {
-                    continue;
-                }
-                let mut planar = true;
-                for x in 0..4 {
-                    if dot(g.corner_normal[x], np) <= 0.0 {
-                        planar = false;
-                    }
-                    for y in x + 1..4 {
-                        if dot(g.corner_normal[x], g.corner_normal[y]) < cfg.min_normal_dot {
-                            planar = false;
-                        }
-                    }
-                }
-                if !planar {
-                    continue;
-                }
-                let quad = ord.map(gid);
-                let sbar = quad.iter().map(|&v| spacing[v as usize]).sum::<f32>() / 4.0;
-                if lmax > cfg.max_edge_over_spacing * sbar {
-                    continue;
-                }
-                let lbar = (g.len[0] + g.len[1] + g.len[2] + g.len[3]) / 4.0;
-                let base = cfg.w_length * (lbar / sbar - 1.0) + cfg.w_shape * (1.0 - g.jacobian);
-                pre.push(Pre { quad, local: [a, b, c], q3, normal: g.normal, len: g.len, base });
+    sc.nb.clear();
+    sc.nb.extend(neighbours(knn, n, i, cfg.k));
+    sc.rel.clear();
+    sc.rel.extend(sc.nb.iter().map(|&j| sub(points[j as usize], p)));
+    sc.uv.clear();
+    sc.uv.extend(sc.rel.iter().map(|r| [dot(*r, tu), dot(*r, tv)]));
+    let m = sc.nb.len();
+    let w = m + 1;
+    sc.pre.clear();
+    sc.out.clear();
+    sc.e.clear();
+    sc.d.clear();
+    sc.t1.clear();
+    sc.t2.clear();
+    sc.t3.clear();
+    {
+        let pos3 = |l: usize| if l == 0 { [0.0f32; 3] } else { sc.rel[l - 1] };
+        let pos2 = |l: usize| if l == 0 { [0.0f32; 2] } else { sc.uv[l - 1] };
+        let o = [0.0f32; 2];
+        for x in 0..w {
+            for y in 0..w {
+                let ev = sub(pos3(y), pos3(x));
+                sc.e.push(ev);
+                sc.d.push(norm(ev));
+                sc.t1.push(sign(orient2(pos2(x), o, pos2(y))));
+                sc.t2.push(sign(orient2(o, pos2(x), pos2(y))));
+                sc.t3.push(sign(orient2(pos2(x), pos2(y), o)));
             }
         }
     }
-    // The inside count only adds to the score (its weights are ≥ 0), so candidates are
-    // visited by base score and the count is computed only while it can still
-    // make the budget: exactly the top `per_point` of the full score, cheaply.
+    // The lazy selection relies on a strict candidate order and on scores that are
+    // never NaN: no two bit-identical points here, coordinates small enough that no
+    // product overflows (the normalised frame has |x| ≤ 2), finite weights.
+    let bounded = sc.rel.iter().all(|r| r.iter().all(|x| x.abs() <= 1e9));
+    let weights_ok = cfg.w_shape.is_finite()
+        && cfg.w_shape >= 0.0
+        && cfg.w_inside_first.is_finite()
+        && cfg.w_inside.is_finite();
+    let distinct = || {
+        for x in 0..w {
+            let px = if x == 0 { p } else { points[sc.nb[x - 1] as usize] };
+            for y in x + 1..w {
+                if px.map(f32::to_bits) == points[sc.nb[y - 1] as usize].map(f32::to_bits) {
+                    return false;
+                }
+            }
+        }
+        true
+    };
+    let lazy = bounded && weights_ok && distinct();
+    let loc = Local {
+        i,
+        np,
+        w,
+        rel: &sc.rel,
+        uv: &sc.uv,
+        nb: &sc.nb,
+        e: &sc.e,
+        d: &sc.d,
+        t1: &sc.t1,
+        t2: &sc.t2,
+        t3: &sc.t3,
+        spacing,
+        cfg,
+    };
+    sc.ordered.clear();
+    for a in 1..=m {
+        for b in a + 1..=m {
+            for c in b + 1..=m {
+                if let Some(o) = loc.stage1(a, b, c) {
+                    sc.ordered.push(o);
+                }
+            }
+        }
+    }
+    if lazy && sc.ordered.iter().all(|o| !o.length_term.is_nan()) {
+        select_lazy(&loc, points, &sc.ordered, &mut sc.keys, &mut sc.heap, &mut sc.pre, &mut sc.out);
+    } else {
+        sc.pre.extend(sc.ordered.iter().filter_map(|o| loc.stage2(o)));
+        select_sorted(&loc, points, &mut sc.pre, &mut sc.out);
+    }
+}
+
+/// Inserts a scored candidate into the kept list (best first, ties by coordinates),
+/// keeping at most `per_point`.
+#[inline]
+fn keep(out: &mut Vec<Kept>, points: &[[f32; 3]], k: Kept, per_point: usize) {
+    let at = out.partition_point(|o| {
+        o.score.total_cmp(&k.score).then_with(|| coord_order(points, &o.quad, &k.quad)).is_lt()
+    });
+    out.insert(at, k);
+    out.truncate(per_point);
+}
+
+/// The kept list from all filter survivors sorted by base score. The inside count
+/// only adds to the score (its weights are ≥ 0), so candidates are visited by base
+/// score and the count is computed only while it can still make the budget.
+fn select_sorted(loc: &Local<'_>, points: &[[f32; 3]], pre: &mut [Pre], out: &mut Vec<Kept>) {
+    let cfg = loc.cfg;
     pre.sort_unstable_by(|x, y| x.base.total_cmp(&y.base));
     let (w_first, w_more) = (cfg.w_inside_first.max(0.0), cfg.w_inside.max(0.0));
-    let mut out: Vec<Kept> = Vec::with_capacity(cfg.per_point + 1);
-    for c in &pre {
+    for c in pre.iter() {
         if out.len() >= cfg.per_point && c.base > out[out.len() - 1].score {
             break;
         }
-        let inside = inside_count(c, &rel, cfg);
+        let inside = inside_count(c, loc.rel, cfg);
         let score = c.base + w_first * inside.min(1) as f32 + w_more * inside.saturating_sub(1) as f32;
         if out.len() >= cfg.per_point && score > out[out.len() - 1].score {
             continue;
         }
-        let k = Kept { quad: c.quad, score, inside };
-        let at = out.partition_point(|o| {
-            o.score.total_cmp(&score).then_with(|| coord_order(points, &o.quad, &k.quad)).is_lt()
-        });
-        out.insert(at, k);
-        out.truncate(cfg.per_point);
+        keep(out, points, Kept { quad: c.quad, score, inside }, cfg.per_point);
     }
-    out
+}
+
+/// The same kept list as [`select_sorted`], computing less: `length_term` is a lower
+/// bound of the base score (the shape term `w_shape · (1 − J)` is ≥ 0), and the base
+/// score one of the full score, so candidates are taken best bound first (from the
+/// bound-sorted list or a heap of evaluated base scores) and nothing is evaluated once
+/// every remaining bound exceeds the worst kept score. Without NaN scores and with no
+/// two candidates of equal (score, coordinates) — the caller checks both — the kept
+/// list is the top `per_point` of a strict order, whatever the visiting order.
+fn select_lazy(
+    loc: &Local<'_>,
+    points: &[[f32; 3]],
+    ordered: &[Ordered],
+    keys: &mut Vec<u64>,
+    heap: &mut std::collections::BinaryHeap<std::cmp::Reverse<u64>>,
+    pre: &mut Vec<Pre>,
+    out: &mut Vec<Kept>,
+) {
+    let cfg = loc.cfg;
+    let (w_first, w_more) = (cfg.w_inside_first.max(0.0), cfg.w_inside.max(0.0));
+    keys.clear();
+    keys.extend(ordered.iter().enumerate().map(|(j, o)| key_bits(o.length_term) << 32 | j as u64));
+    // Usually only the best few hundred bounds are visited: sort those first and the
+    // rest only if the walk gets there.
+    let mut sorted_upto = keys.len();
+    let head = 8 * cfg.per_point.max(1);
+    if keys.len() > head + 1 {
+        keys.select_nth_unstable(head);
+        keys[..head].sort_unstable();
+        sorted_upto = head + 1;
+    } else {
+        keys.sort_unstable();
+    }
+    heap.clear();
+    let mut li = 0;
+    loop {
+        if li == sorted_upto && li < keys.len() {
+            keys[li..].sort_unstable();
+            sorted_upto = keys.len();
+        }
+        let next_bound = keys.get(li).copied();
+        let next_base = heap.peek().map(|r| r.0);
+        let take_bound = match (next_bound, next_base) {
+            (None, None) => break,
+            (Some(_), None) => true,
+            (None, Some(_)) => false,
+            (Some(b), Some(h)) => b < h,
+        };
+        let full = out.len() >= cfg.per_point;
+        if take_bound {
+            let o = &ordered[(next_bound.unwrap_or(0) & 0xffff_ffff) as usize];
+            if full && o.length_term > out[out.len() - 1].score {
+                break;
+            }
+            li += 1;
+            if let Some(c) = loc.stage2(o) {
+                heap.push(std::cmp::Reverse(key_bits(c.base) << 32 | pre.len() as u64));
+                pre.push(c);
+            }
+        } else {
+            heap.pop();
+            let c = &pre[(next_base.unwrap_or(0) & 0xffff_ffff) as usize];
+            if full && c.base > out[out.len() - 1].score {
+                break;
+            }
+            let inside = inside_count(c, loc.rel, cfg);
+            let score = c.base + w_first * inside.min(1) as f32 + w_more * inside.saturating_sub(1) as f32;
+            if full && score > out[out.len() - 1].score {
+                continue;
+            }
+            keep(out, points, Kept { quad: c.quad, score, inside }, cfg.per_point);
+        }
+    }
 }
 
 /// A candidate of one proposer that passed the filters, before its inside count.
@@ -529,16 +877,26 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
     orient_normals(points, &normal_table, &mut normals);
     let spacing = local_spacing(points, &knn, cfg.spacing_k);
 
-    let per_point: Vec<Vec<Kept>> = crate::par::map(n, |i| propose(i, points, &normals, &spacing, &knn, cfg));
-
-    // (sorted vertex key, canonical cyclic quad, rank, score, inside)
-    let mut all: Vec<Entry> = Vec::new();
-    for list in &per_point {
-        for (r, kp) in list.iter().enumerate() {
-            let mut key = kp.quad;
-            key.sort_unstable();
-            all.push((key, canonical(kp.quad), r.min(u16::MAX as usize) as u16, kp.score, kp.inside));
+    // Proposers in fixed chunks, each with its own reused buffers; entries in point
+    // order, then rank order, whatever the thread count.
+    const CHUNK: usize = 64;
+    let chunks: Vec<Vec<Entry>> = crate::par::map(n.div_ceil(CHUNK), |ch| {
+        let mut sc = Scratch::default();
+        let mut entries: Vec<Entry> = Vec::new();
+        for i in ch * CHUNK..((ch + 1) * CHUNK).min(n) {
+            propose(i, points, &normals, &spacing, &knn, cfg, &mut sc);
+            for (r, kp) in sc.out.iter().enumerate() {
+                let mut key = kp.quad;
+                key.sort_unstable();
+                entries.push((key, canonical(kp.quad), r.min(u16::MAX as usize) as u16, kp.score, kp.inside));
+            }
         }
+        entries
+    });
+    // (sorted vertex key, canonical cyclic quad, rank, score, inside)
+    let mut all: Vec<Entry> = Vec::with_capacity(chunks.iter().map(Vec::len).sum());
+    for c in chunks {
+        all.extend(c);
     }
     // Within a vertex set, the entry with the best (rank, score, orientation) first,
     // so the choice does not depend on the proposer order or thread count.
@@ -591,6 +949,120 @@ mod tests {
             }
         }
         v
+    }
+
+    /// The straightforward per-proposer selection `propose` must reproduce bit for bit:
+    /// every triple, the three cyclic orders through `convex_sign`, `quad_geom` and the
+    /// filters, all survivors sorted by base score.
+    fn propose_reference(i: usize, points: &[[f32; 3]], c: &Candidates, cfg: &CandidateConfig) -> Vec<Kept> {
+        let n = points.len();
+        let (p, np) = (points[i], c.normals[i]);
+        let (tu, tv) = tangent_basis(np);
+        let nb: Vec<u32> = neighbours(&c.knn, n, i, cfg.k).collect();
+        let rel: Vec<[f32; 3]> = nb.iter().map(|&j| sub(points[j as usize], p)).collect();
+        let uv: Vec<[f32; 2]> = rel.iter().map(|r| [dot(*r, tu), dot(*r, tv)]).collect();
+        let pos3 = |l: usize| if l == 0 { [0.0f32; 3] } else { rel[l - 1] };
+        let pos2 = |l: usize| if l == 0 { [0.0f32; 2] } else { uv[l - 1] };
+        let gid = |l: usize| if l == 0 { i as u32 } else { nb[l - 1] };
+        let m = nb.len();
+        let mut pre = Vec::new();
+        for a in 1..=m {
+            for b in a + 1..=m {
+                for cc in b + 1..=m {
+                    let mut order = None;
+                    for cand in [[0, a, b, cc], [0, a, cc, b], [0, b, a, cc]] {
+                        let s = convex_sign(cand.map(pos2));
+                        if s != 0 {
+                            order = Some(if s > 0 { cand } else { [cand[0], cand[3], cand[2], cand[1]] });
+                            break;
+                        }
+                    }
+                    let Some(ord) = order else { continue };
+                    let q3 = ord.map(pos3);
+                    let g = quad_geom(q3);
+                    let lmin = g.len.iter().copied().fold(f32::INFINITY, f32::min);
+                    let lmax = g.len.iter().copied().fold(0.0f32, f32::max);
+                    if lmin.is_nan() || lmin <= 0.0 || lmin < cfg.min_edge_ratio * lmax {
+                        continue;
+                    }
+                    if g.sine.iter().any(|&s| s < cfg.min_sine) {
+                        continue;
+                    }
+                    let planar = (0..4).all(|x| {
+                        dot(g.corner_normal[x], np) > 0.0
+                            && (x + 1..4)
+                                .all(|y| dot(g.corner_normal[x], g.corner_normal[y]) >= cfg.min_normal_dot)
+                    });
+                    if !planar {
+                        continue;
+                    }
+                    let quad = ord.map(gid);
+                    let sbar = quad.iter().map(|&v| c.spacing[v as usize]).sum::<f32>() / 4.0;
+                    if lmax > cfg.max_edge_over_spacing * sbar {
+                        continue;
+                    }
+                    let lbar = (g.len[0] + g.len[1] + g.len[2] + g.len[3]) / 4.0;
+                    let base = cfg.w_length * (lbar / sbar - 1.0) + cfg.w_shape * (1.0 - g.jacobian);
+                    pre.push(Pre { quad, local: [a, b, cc], q3, normal: g.normal, len: g.len, base });
+                }
+            }
+        }
+        pre.sort_unstable_by(|x, y| x.base.total_cmp(&y.base));
+        let (w_first, w_more) = (cfg.w_inside_first.max(0.0), cfg.w_inside.max(0.0));
+        let mut out: Vec<Kept> = Vec::new();
+        for q in &pre {
+            if out.len() >= cfg.per_point && q.base > out[out.len() - 1].score {
+                break;
+            }
+            let inside = inside_count(q, &rel, cfg);
+            let score = q.base + w_first * inside.min(1) as f32 + w_more * inside.saturating_sub(1) as f32;
+            if out.len() >= cfg.per_point && score > out[out.len() - 1].score {
+                continue;
+            }
+            let k = Kept { quad: q.quad, score, inside };
+            let at = out.partition_point(|o| {
+                o.score.total_cmp(&score).then_with(|| coord_order(points, &o.quad, &k.quad)).is_lt()
+            });
+            out.insert(at, k);
+            out.truncate(cfg.per_point);
+        }
+        out
+    }
+
+    #[test]
+    fn propose_matches_the_straightforward_reference_bit_for_bit() {
+        let mut rng = crate::rng::Rng::new(3);
+        // A noisy bumpy sheet, a random blob (many non-convex and sliver triples), and
+        // a lattice with duplicated points (the exact tie-keeping path).
+        let sheet: Vec<[f32; 3]> = (0..120)
+            .map(|i| {
+                let (x, y) = ((i % 12) as f32 * 0.1, (i / 12) as f32 * 0.1);
+                [x + 0.03 * rng.f32(), y + 0.03 * rng.f32(), 0.1 * (3.0 * x).sin() * y + 0.01 * rng.f32()]
+            })
+            .collect();
+        let blob: Vec<[f32; 3]> = (0..80).map(|_| [rng.f32(), rng.f32(), 0.3 * rng.f32()]).collect();
+        let mut dup = grid(5, 5, 0.0);
+        dup.extend(grid(5, 5, 0.0));
+        for (pts, k, per_point) in [(&sheet, 20, 32), (&sheet, 10, 4), (&blob, 14, 6), (&dup, 12, 8)] {
+            let cfg = CandidateConfig { k, per_point, ..CandidateConfig::default() };
+            let c = generate(pts, &cfg).unwrap();
+            let mut sc = Scratch::default();
+            let mut total = 0;
+            for i in 0..pts.len() {
+                propose(i, pts, &c.normals, &c.spacing, &c.knn, &cfg, &mut sc);
+                let want = propose_reference(i, pts, &c, &cfg);
+                assert_eq!(sc.out.len(), want.len(), "point {i}");
+                for (g, w) in sc.out.iter().zip(&want) {
+                    assert_eq!(
+                        (g.quad, g.score.to_bits(), g.inside),
+                        (w.quad, w.score.to_bits(), w.inside),
+                        "point {i}"
+                    );
+                }
+                total += want.len();
+            }
+            assert!(total > 0, "the reference kept nothing: the comparison would be empty");
+        }
     }
 
     #[test]

@@ -2,8 +2,6 @@
 //! `--key value`, `-o value`, and `--help`/`-h`. Each subcommand declares which
 //! options take a value and which are switches, so typos are errors.
 
-#![allow(dead_code)] // some helpers are used by only some subcommands
-
 use point2quad::Error;
 
 /// Parsed arguments of one subcommand.

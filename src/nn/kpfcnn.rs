@@ -377,9 +377,13 @@ impl PointPyramid {
 }
 
 /// A KPConv's weights `[K × C_in × C_out]` and its kernel points (scaled to the radius).
+/// The kernel points are also a buffer of the store (`kp`, `[K × 3]`), so a checkpoint
+/// carries the exact points the weights were trained with (see
+/// [`Kpfcnn::load_kernel_points`]); `kernel` is the copy the geometry reads.
 #[derive(Clone, Debug)]
 struct Conv {
     w: ParamId,
+    kp: ParamId,
     kernel: Arc<Vec<[f32; 3]>>,
 }
 
@@ -446,8 +450,13 @@ impl Builder<'_> {
         let radius = self.cfg.conv_radius * self.cfg.cell(level);
         let seed = self.cfg.seed.wrapping_mul(0x9E37_79B9).wrapping_add(self.n_convs);
         self.n_convs += 1;
-        let kernel = Arc::new(scaled_kernel_points(k, seed, radius)?);
-        Ok(Conv { w, kernel })
+        let kernel = scaled_kernel_points(k, seed, radius)?;
+        let kp = self.params.add(
+            &format!("{name}.kernel_points"),
+            ParamKind::Buffer,
+            Tensor::new(&[k, 3], kernel.iter().flatten().copied().collect())?,
+        )?;
+        Ok(Conv { w, kp, kernel: Arc::new(kernel) })
     }
 }
 
@@ -508,6 +517,41 @@ impl Kpfcnn {
     /// The configuration.
     pub fn config(&self) -> &KpfcnnConfig {
         &self.cfg
+    }
+
+    /// Re-reads every KPConv's kernel points from their buffers in `params`
+    /// (`kpfcnn.enc<i>.kpconv.kernel_points`, `[K × 3]`). Call it after loading a
+    /// checkpoint into `params`: the network then uses the points stored with the weights,
+    /// not the ones [`Kpfcnn::new`] regenerated from the seed (which would differ if the
+    /// placement code or the platform's `sin`/`cos` ever changed).
+    ///
+    /// # Errors
+    /// `InvalidInput` when a buffer has the wrong shape or a non-finite coordinate.
+    pub fn load_kernel_points(&mut self, params: &ParamStore) -> Result<()> {
+        let k = self.cfg.num_kernel_points;
+        for (i, block) in self.blocks.iter_mut().enumerate() {
+            let conv = match block {
+                Block::Simple { conv, .. } => conv,
+                Block::Resnetb(r) => &mut r.conv,
+            };
+            let t = params.get(conv.kp);
+            if t.dims() != [k, 3] {
+                return Err(Error::invalid(format!(
+                    "'{}' is {}, expected [{k}, 3]",
+                    params.name(conv.kp),
+                    t.shape()
+                )));
+            }
+            if let Some(j) = t.data().iter().position(|x| !x.is_finite()) {
+                return Err(Error::invalid(format!(
+                    "'{}' (block {i}): kernel point {} is not finite",
+                    params.name(conv.kp),
+                    j / 3
+                )));
+            }
+            conv.kernel = Arc::new(t.data().chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect());
+        }
+        Ok(())
     }
 
     /// The KPConv layers' parameters in execution order.

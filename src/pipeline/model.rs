@@ -15,12 +15,17 @@
 use crate::nn::batch_norm::BatchNormConfig;
 use crate::nn::checkpoint::{self, Checkpoint, TrainState};
 use crate::nn::conv1d::{Conv1d, ConvBnAct};
+use crate::nn::kpfcnn::{prepare, BlockKind, InputFeatures, Kpfcnn, KpfcnnConfig};
 use crate::nn::module::{Module, ResidualBlock};
 use crate::rng::Rng;
+use crate::spatial::neighborhoods::NeighborCap;
 use crate::tensor::{Act, Graph, ParamStore, Tensor, Var};
 use crate::{Error, Result};
 use std::path::Path;
 use std::sync::Arc;
+
+/// The model presets [`ModelConfig::preset`] knows, in the order the CLI lists them.
+pub const PRESETS: [&str; 3] = ["default", "default_kp", "paper"];
 
 /// The whole network's shape.
 #[derive(Clone, Debug, PartialEq)]
@@ -33,6 +38,11 @@ pub struct ModelConfig {
     pub face_widths: [usize; 5],
     /// Per-point feature width d_P gathered for each corner (0: no point encoder).
     pub point_dim: usize,
+    /// The point encoder (KPFCNN): `Some` exactly when `point_dim > 0`, with
+    /// `out_dim == point_dim`. Its `seed` is a salt mixed with the model's seed at
+    /// initialisation; kernel points and weights are stored in checkpoints, so loading
+    /// does not depend on it.
+    pub point_encoder: Option<KpfcnnConfig>,
     /// Classifier hidden widths (each conv1d+BN+ReLU); a final conv1d maps to 2 logits.
     pub classifier_widths: Vec<usize>,
     /// LeakyReLU slope in the face encoder.
@@ -43,13 +53,15 @@ pub struct ModelConfig {
 
 impl ModelConfig {
     /// The paper's widths (DESIGN §3): face 29→128→128(res)→256→512→256, classifier
-    /// 512→512→256→128→64→2, d_P = 64.
+    /// 512→512→256→128→64→2, and the `paper` KPFCNN ([`KpfcnnConfig::paper`], about
+    /// 24.4M parameters) with d_P = 64.
     pub fn paper() -> ModelConfig {
         ModelConfig {
             preset: "paper".into(),
             use_context: false,
             face_widths: [128, 128, 256, 512, 256],
             point_dim: 64,
+            point_encoder: Some(KpfcnnConfig { out_dim: 64, ..KpfcnnConfig::paper() }),
             classifier_widths: vec![512, 256, 128, 64],
             leaky_slope: 0.1,
             bn_momentum: 0.02,
@@ -59,28 +71,53 @@ impl ModelConfig {
     /// The preset sized to train on two CPU cores: same structure, about a quarter of
     /// the widths, plus the cheap context features (DESIGN §8), and batch-norm momentum
     /// 0.1 (few steps per epoch: 0.02 leaves the running statistics far off for many
-    /// epochs).
+    /// epochs). No point encoder (the shipped weights are this preset).
     pub fn default_preset() -> ModelConfig {
         ModelConfig {
             preset: "default".into(),
             use_context: true,
             face_widths: [64, 64, 96, 128, 96],
             point_dim: 0,
+            point_encoder: None,
             classifier_widths: vec![128, 64, 32],
             leaky_slope: 0.1,
             bn_momentum: 0.1,
         }
     }
 
-    /// A preset by name (`default` or `paper`).
+    /// `default` plus a small KPFCNN point encoder, sized so that a training step on a
+    /// 10,000-point cloud stays well under a second on two cores: 3 levels (cells 0.03
+    /// nominal, 0.06, 0.12), blocks simple, resnetb, (strided, resnetb) ×2, widths
+    /// 16 → 64, 15 rigid kernel points, d_P = 32, batch-norm momentum 0.1 like the face
+    /// net.
+    pub fn default_kp() -> ModelConfig {
+        let d_p = 32;
+        ModelConfig {
+            preset: "default_kp".into(),
+            point_dim: d_p,
+            point_encoder: Some(KpfcnnConfig {
+                first_features_dim: 16,
+                out_dim: d_p,
+                bn_momentum: 0.1,
+                ..KpfcnnConfig::default_preset()
+            }),
+            ..ModelConfig::default_preset()
+        }
+    }
+
+    /// A preset by name (one of [`PRESETS`]).
     ///
     /// # Errors
     /// `Error::Usage` for an unknown name.
     pub fn preset(name: &str) -> Result<ModelConfig> {
         match name {
             "default" => Ok(ModelConfig::default_preset()),
+            "default_kp" => Ok(ModelConfig::default_kp()),
             "paper" => Ok(ModelConfig::paper()),
-            other => Err(Error::Usage(format!("unknown model preset {other:?} (use default or paper)"))),
+            other => Err(Error::Usage(format!(
+                "unknown model preset {other:?} (use one of {})",
+                PRESETS.join(", ")
+            ))),
         }
     }
 
@@ -90,10 +127,34 @@ impl ModelConfig {
             + if self.use_context { crate::pipeline::features::CONTEXT_DIM } else { 0 }
     }
 
-    /// The config as `key = value` lines (stored in checkpoints).
+    /// Checks the config's consistency.
+    ///
+    /// # Errors
+    /// `Error::InvalidInput` naming the problem: a zero width, a point encoder without
+    /// `point_dim` (or the reverse), its `out_dim` differing from `point_dim`, or an
+    /// invalid KPFCNN config.
+    pub fn validate(&self) -> Result<()> {
+        if self.face_widths.contains(&0) || self.classifier_widths.contains(&0) {
+            return Err(Error::invalid("model config: zero width"));
+        }
+        match (&self.point_encoder, self.point_dim) {
+            (None, 0) => Ok(()),
+            (None, d) => Err(Error::invalid(format!("model config: point_dim {d} but no point encoder"))),
+            (Some(_), 0) => Err(Error::invalid("model config: a point encoder but point_dim 0")),
+            (Some(k), d) if k.out_dim != d => Err(Error::invalid(format!(
+                "model config: point encoder gives {} features per point, point_dim is {d}",
+                k.out_dim
+            ))),
+            (Some(k), _) => k.validate(),
+        }
+    }
+
+    /// The config as `key = value` lines (stored in checkpoints). The point encoder's
+    /// keys (`kp_*`) are written only when there is one, so a config without it reads
+    /// exactly as before they existed.
     pub fn to_text(&self) -> String {
         let list = |v: &[usize]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(",");
-        format!(
+        let mut t = format!(
             "preset = {}\nuse_context = {}\nface_in = {}\nface_widths = {}\npoint_dim = {}\nclassifier_widths = {}\nleaky_slope = {}\nbn_momentum = {}\n",
             self.preset,
             self.use_context,
@@ -103,18 +164,50 @@ impl ModelConfig {
             list(&self.classifier_widths),
             self.leaky_slope,
             self.bn_momentum
-        )
+        );
+        if let Some(k) = &self.point_encoder {
+            let blocks: Vec<&str> = k.blocks.iter().map(|&b| block_name(b)).collect();
+            let input = match k.input {
+                InputFeatures::Ones => "ones",
+                InputFeatures::OnesXyz => "ones_xyz",
+            };
+            let cap = match k.neighbor_cap {
+                NeighborCap::Fixed(n) => format!("fixed {n}"),
+                NeighborCap::Percentile(p) => format!("percentile {p}"),
+            };
+            // `{}` prints floats in their shortest round-tripping form.
+            t += &format!(
+                "kp_blocks = {}\nkp_first_features_dim = {}\nkp_input = {input}\nkp_first_cell = {}\nkp_conv_radius = {}\nkp_kp_extent = {}\nkp_num_kernel_points = {}\nkp_neighbor_cap = {cap}\nkp_bn_momentum = {}\nkp_bn_eps = {}\nkp_leaky_slope = {}\nkp_seed = {}\n",
+                blocks.join(","),
+                k.first_features_dim,
+                k.first_cell,
+                k.conv_radius,
+                k.kp_extent,
+                k.num_kernel_points,
+                k.bn_momentum,
+                k.bn_eps,
+                k.leaky_slope,
+                k.seed
+            );
+        }
+        t
     }
 
-    /// Parses [`ModelConfig::to_text`] output; `name` is used in errors.
+    /// Parses [`ModelConfig::to_text`] output; `name` is used in errors. Configs
+    /// written before the point encoder existed (no `kp_*` keys, `point_dim = 0`) read
+    /// unchanged.
     ///
     /// # Errors
-    /// `Error::Parse` naming the line for a malformed or missing key, and when the
-    /// stored input width does not match this build's feature layout.
+    /// `Error::Parse` naming the line for a malformed, unknown or repeated key; naming
+    /// the file (line 0) for missing keys, an inconsistent config (see
+    /// [`ModelConfig::validate`]), and when the stored input width does not match this
+    /// build's feature layout.
     pub fn from_text(text: &str, name: &Path) -> Result<ModelConfig> {
         let mut c = ModelConfig::default_preset();
+        let mut kp = KpfcnnConfig::default_preset();
         let mut face_in = None;
-        let mut seen = 0u32;
+        let mut seen: Vec<&str> = Vec::new();
+        let mut kp_seen = 0usize;
         for (i, line) in text.lines().enumerate() {
             let line = line.trim();
             if line.is_empty() || line.starts_with('#') {
@@ -123,31 +216,84 @@ impl ModelConfig {
             let bad = |m: &str| Error::parse(name, i + 1, format!("model config: {m}: {line:?}"));
             let (k, v) = line.split_once('=').ok_or_else(|| bad("expected key = value"))?;
             let (k, v) = (k.trim(), v.trim());
+            if seen.contains(&k) {
+                return Err(bad("repeated key"));
+            }
             let usize_list = |v: &str| -> Result<Vec<usize>> {
                 v.split(',').map(|x| x.trim().parse::<usize>().map_err(|_| bad("bad width list"))).collect()
             };
+            let num = |v: &str| v.parse::<f32>().map_err(|_| bad("bad number"));
+            let int = |v: &str| v.parse::<usize>().map_err(|_| bad("bad number"));
             match k {
                 "preset" => c.preset = v.to_string(),
                 "use_context" => c.use_context = v.parse().map_err(|_| bad("bad bool"))?,
-                "face_in" => face_in = Some(v.parse::<usize>().map_err(|_| bad("bad number"))?),
+                "face_in" => face_in = Some(int(v)?),
                 "face_widths" => {
                     let w = usize_list(v)?;
                     c.face_widths = w.try_into().map_err(|_| bad("face_widths needs 5 widths"))?;
                 }
-                "point_dim" => c.point_dim = v.parse().map_err(|_| bad("bad number"))?,
+                "point_dim" => c.point_dim = int(v)?,
                 "classifier_widths" => c.classifier_widths = usize_list(v)?,
-                "leaky_slope" => c.leaky_slope = v.parse().map_err(|_| bad("bad number"))?,
-                "bn_momentum" => c.bn_momentum = v.parse().map_err(|_| bad("bad number"))?,
+                "leaky_slope" => c.leaky_slope = num(v)?,
+                "bn_momentum" => c.bn_momentum = num(v)?,
+                _ if k.starts_with("kp_") => {
+                    match k {
+                        "kp_blocks" => {
+                            kp.blocks = v
+                                .split(',')
+                                .map(|b| parse_block(b.trim()).ok_or_else(|| bad("unknown block kind")))
+                                .collect::<Result<_>>()?
+                        }
+                        "kp_first_features_dim" => kp.first_features_dim = int(v)?,
+                        "kp_input" => {
+                            kp.input = match v {
+                                "ones" => InputFeatures::Ones,
+                                "ones_xyz" => InputFeatures::OnesXyz,
+                                _ => return Err(bad("kp_input must be ones or ones_xyz")),
+                            }
+                        }
+                        "kp_first_cell" => kp.first_cell = num(v)?,
+                        "kp_conv_radius" => kp.conv_radius = num(v)?,
+                        "kp_kp_extent" => kp.kp_extent = num(v)?,
+                        "kp_num_kernel_points" => kp.num_kernel_points = int(v)?,
+                        "kp_neighbor_cap" => {
+                            kp.neighbor_cap = match v.split_once(' ') {
+                                Some(("fixed", n)) => NeighborCap::Fixed(int(n.trim())?),
+                                Some(("percentile", p)) => NeighborCap::Percentile(
+                                    p.trim().parse::<f64>().map_err(|_| bad("bad number"))?,
+                                ),
+                                _ => return Err(bad("kp_neighbor_cap must be 'fixed N' or 'percentile P'")),
+                            }
+                        }
+                        "kp_bn_momentum" => kp.bn_momentum = num(v)?,
+                        "kp_bn_eps" => kp.bn_eps = num(v)?,
+                        "kp_leaky_slope" => kp.leaky_slope = num(v)?,
+                        "kp_seed" => kp.seed = v.parse().map_err(|_| bad("bad number"))?,
+                        _ => return Err(bad("unknown key")),
+                    }
+                    kp_seen += 1;
+                }
                 _ => return Err(bad("unknown key")),
             }
-            seen += 1;
+            seen.push(k);
         }
-        if seen < 7 {
+        if seen.len() - kp_seen < 7 {
             return Err(Error::parse(name, 0, "model config: missing keys"));
         }
-        if c.face_widths.contains(&0) || c.classifier_widths.contains(&0) {
-            return Err(Error::parse(name, 0, "model config: zero width"));
+        if c.point_dim > 0 {
+            if kp_seen < KP_KEYS {
+                return Err(Error::parse(
+                    name,
+                    0,
+                    format!("model config: point_dim {} needs all {KP_KEYS} kp_* keys", c.point_dim),
+                ));
+            }
+            kp.out_dim = c.point_dim;
+            c.point_encoder = Some(kp);
+        } else if kp_seen > 0 {
+            return Err(Error::parse(name, 0, "model config: kp_* keys with point_dim 0"));
         }
+        c.validate().map_err(|e| Error::parse(name, 0, e.to_string()))?;
         if let Some(fi) = face_in {
             if fi != c.face_in() {
                 return Err(Error::parse(
@@ -164,6 +310,23 @@ impl ModelConfig {
     }
 }
 
+/// Number of `kp_*` keys [`ModelConfig::to_text`] writes for a point encoder.
+const KP_KEYS: usize = 12;
+
+fn block_name(b: BlockKind) -> &'static str {
+    match b {
+        BlockKind::Simple => "simple",
+        BlockKind::Resnetb => "resnetb",
+        BlockKind::ResnetbStrided => "resnetb_strided",
+    }
+}
+
+fn parse_block(s: &str) -> Option<BlockKind> {
+    [BlockKind::Simple, BlockKind::Resnetb, BlockKind::ResnetbStrided]
+        .into_iter()
+        .find(|&b| block_name(b) == s)
+}
+
 /// The layers (parameter handles) of the network; the values live in a
 /// [`ParamStore`], so a training graph can borrow the store mutably while the
 /// network is borrowed shared.
@@ -174,22 +337,26 @@ pub struct Network {
     residual: ResidualBlock,
     classifier: Vec<ConvBnAct>,
     head: Conv1d,
+    point: Option<Kpfcnn>,
 }
 
 /// A network with its parameters.
 pub struct Model {
     /// The layers.
     pub net: Network,
-    /// All parameters and batch-norm buffers.
+    /// All parameters and batch-norm buffers (the point encoder's, with its kernel
+    /// points, included).
     pub params: ParamStore,
 }
 
 impl Model {
-    /// A freshly initialised network (Kaiming-uniform convs, BN weight 1 / bias 0).
+    /// A freshly initialised network (Kaiming-uniform convs, BN weight 1 / bias 0; the
+    /// point encoder as [`Kpfcnn::new`] with its seed salted by `seed`).
     ///
     /// # Errors
-    /// `Error::InvalidInput` for a config with zero widths.
+    /// `Error::InvalidInput` for an inconsistent config ([`ModelConfig::validate`]).
     pub fn new(config: ModelConfig, seed: u64) -> Result<Model> {
+        config.validate()?;
         let mut rng = Rng::new(seed);
         let mut params = ParamStore::new();
         let bn = BatchNormConfig { momentum: config.bn_momentum, ..BatchNormConfig::default() };
@@ -217,7 +384,17 @@ impl Model {
             cin = cout;
         }
         let head = Conv1d::new(&mut params, "cls.head", cin, 2, true, &mut rng)?;
-        Ok(Model { net: Network { config, face, residual, classifier, head }, params })
+        // Created last, so the face net and classifier draw the same initial weights
+        // for a seed whether or not there is a point encoder.
+        let point = match &config.point_encoder {
+            Some(k) => {
+                let salted =
+                    KpfcnnConfig { seed: k.seed ^ seed.wrapping_mul(0x9E37_79B9_7F4A_7C15), ..k.clone() };
+                Some(Kpfcnn::new(&salted, &mut params)?)
+            }
+            None => None,
+        };
+        Ok(Model { net: Network { config, face, residual, classifier, head, point }, params })
     }
 
     /// The network's shape.
@@ -231,11 +408,68 @@ impl Model {
     }
 
     /// Probability that each candidate is a real face, in inference mode (running
-    /// batch-norm statistics, nothing recorded).
+    /// batch-norm statistics, nothing recorded), for a model without point encoder.
     ///
     /// # Errors
-    /// `Error::Shape` when `face_features.len()` is not a multiple of the input width.
+    /// `Error::Shape` when `face_features.len()` is not a multiple of the input width,
+    /// or the model has a point encoder (use [`Model::predict_with_points`]).
     pub fn predict(&self, face_features: &[f32]) -> Result<Vec<f32>> {
+        if self.net.config.point_dim > 0 {
+            return Err(Error::Shape {
+                op: "predict",
+                msg: "point-encoder models need predict_with_points".into(),
+            });
+        }
+        let m = self.rows(face_features)?;
+        if m == 0 {
+            return Ok(Vec::new());
+        }
+        let mut g = Graph::eval_shared(&self.params);
+        let x = g.input(Tensor::new(&[m, self.net.config.face_in()], face_features.to_vec())?);
+        let logits = self.net.forward(&mut g, x, None)?;
+        Ok(probabilities(g.value(logits).data()))
+    }
+
+    /// Probability that each candidate is a real face, in inference mode, for any
+    /// model: `points` is the cloud in the normalised frame the candidates were built in
+    /// (what the point encoder reads), `corners` the candidates (indices into `points`,
+    /// one per row of `face_features`). Without a point encoder this is
+    /// [`Model::predict`] (the points are not read).
+    ///
+    /// # Errors
+    /// `Error::Shape` when `face_features` is not `corners.len()` rows of the input
+    /// width; `Error::InvalidInput` for a corner index out of range (naming the
+    /// candidate) or, with a point encoder, a cloud [`prepare`] rejects.
+    pub fn predict_with_points(
+        &self,
+        points: &[[f32; 3]],
+        corners: &[[u32; 4]],
+        face_features: &[f32],
+    ) -> Result<Vec<f32>> {
+        let m = self.rows(face_features)?;
+        if m != corners.len() {
+            return Err(Error::Shape {
+                op: "predict_with_points",
+                msg: format!("{m} feature rows for {} candidates", corners.len()),
+            });
+        }
+        let Some(kp) = &self.net.point else {
+            return self.predict(face_features);
+        };
+        check_corners(corners, points.len())?;
+        if m == 0 {
+            return Ok(Vec::new());
+        }
+        let pyr = prepare(points, kp.config())?;
+        let mut g = Graph::eval_shared(&self.params);
+        let pf = kp.forward(&mut g, &pyr)?;
+        let x = g.input(Tensor::new(&[m, self.net.config.face_in()], face_features.to_vec())?);
+        let logits = self.net.forward(&mut g, x, Some((pf, corner_indices(corners))))?;
+        Ok(probabilities(g.value(logits).data()))
+    }
+
+    /// Rows of `face_features` for this model's input width.
+    fn rows(&self, face_features: &[f32]) -> Result<usize> {
         let fin = self.net.config.face_in();
         if face_features.len() % fin != 0 {
             return Err(Error::Shape {
@@ -243,20 +477,7 @@ impl Model {
                 msg: format!("{} values is not M × {fin}", face_features.len()),
             });
         }
-        let m = face_features.len() / fin;
-        if m == 0 {
-            return Ok(Vec::new());
-        }
-        if self.net.config.point_dim > 0 {
-            return Err(Error::Shape {
-                op: "predict",
-                msg: "point-encoder models need predict_with_points".into(),
-            });
-        }
-        let mut g = Graph::eval_shared(&self.params);
-        let x = g.input(Tensor::new(&[m, fin], face_features.to_vec())?);
-        let logits = self.net.forward(&mut g, x, None)?;
-        Ok(probabilities(g.value(logits).data()))
+        Ok(face_features.len() / fin)
     }
 
     /// The weights and config as a checkpoint (with the optional training state).
@@ -268,16 +489,20 @@ impl Model {
     ///
     /// # Errors
     /// `Error::Checkpoint` for a corrupt file, a config this build cannot read, or
-    /// tensors that do not match the config.
+    /// tensors that do not match the config (the point encoder's kernel points
+    /// included).
     pub fn from_checkpoint(ckpt: &Checkpoint, name: &Path) -> Result<Model> {
+        let as_ckpt_err = |e: Error| Error::Checkpoint { path: name.to_path_buf(), msg: e.to_string() };
         let text = std::str::from_utf8(&ckpt.config).map_err(|_| Error::Checkpoint {
             path: name.to_path_buf(),
             msg: "model config is not UTF-8".into(),
         })?;
-        let config = ModelConfig::from_text(text, name)
-            .map_err(|e| Error::Checkpoint { path: name.to_path_buf(), msg: e.to_string() })?;
-        let mut model = Model::new(config, 0)?;
+        let config = ModelConfig::from_text(text, name).map_err(as_ckpt_err)?;
+        let mut model = Model::new(config, 0).map_err(as_ckpt_err)?;
         ckpt.apply_to(&mut model.params, name)?;
+        if let Some(kp) = &mut model.net.point {
+            kp.load_kernel_points(&model.params).map_err(as_ckpt_err)?;
+        }
         Ok(model)
     }
 
@@ -298,10 +523,32 @@ impl Model {
     }
 }
 
+/// `InvalidInput` naming the first candidate with a corner index `>= n_points`.
+pub(crate) fn check_corners(corners: &[[u32; 4]], n_points: usize) -> Result<()> {
+    if let Some((c, q)) = corners.iter().enumerate().find(|(_, q)| q.iter().any(|&v| v as usize >= n_points))
+    {
+        return Err(Error::invalid(format!(
+            "candidate {c} {q:?} refers to a point beyond the {n_points} given"
+        )));
+    }
+    Ok(())
+}
+
+/// The candidates' corners flattened row-major (`4·M`), as [`Network::forward`] reads them.
+pub fn corner_indices(corners: &[[u32; 4]]) -> Arc<[u32]> {
+    corners.iter().flatten().copied().collect::<Vec<u32>>().into()
+}
+
 impl Network {
+    /// The point encoder, when the config has one.
+    pub fn point_encoder(&self) -> Option<&Kpfcnn> {
+        self.point.as_ref()
+    }
+
     /// Builds the logits `[M × 2]` on `g` from the face features `[M × face_in]`
-    /// and, when the config has a point encoder, per-point features `[N × d_P]` with
-    /// the candidates' corner indices (`4·M`, row-major).
+    /// and, when the config has a point encoder, per-point features `[N × d_P]` (from
+    /// [`Network::point_encoder`], or any other source) with the candidates' corner
+    /// indices (`4·M`, row-major: [`corner_indices`]).
     ///
     /// # Errors
     /// `Error::Shape` when the inputs do not match the config.
@@ -367,16 +614,65 @@ mod tests {
 
     #[test]
     fn config_text_round_trips_and_rejects_garbage() {
-        for c in [ModelConfig::paper(), ModelConfig::default_preset()] {
+        let odd = ModelConfig {
+            point_encoder: Some(KpfcnnConfig {
+                input: InputFeatures::OnesXyz,
+                neighbor_cap: NeighborCap::Fixed(7),
+                first_cell: 0.1 + 0.2,
+                seed: u64::MAX,
+                out_dim: 5,
+                ..KpfcnnConfig::paper()
+            }),
+            point_dim: 5,
+            ..ModelConfig::default_kp()
+        };
+        for name in PRESETS {
+            let c = ModelConfig::preset(name).unwrap();
+            assert_eq!(c.preset, name);
+            c.validate().unwrap();
+        }
+        for c in PRESETS.iter().map(|n| ModelConfig::preset(n).unwrap()).chain([odd]) {
             let back = ModelConfig::from_text(&c.to_text(), Path::new("x")).unwrap();
             assert_eq!(back, c);
         }
+        assert!(ModelConfig::preset("nope").is_err());
         let p = Path::new("cfg");
         assert!(ModelConfig::from_text("preset = x\nbogus = 1\n", p).is_err());
         assert!(ModelConfig::from_text("", p).is_err());
         let mut t = ModelConfig::default_preset().to_text();
         t = t.replace("face_widths = 64", "face_widths = 0");
         assert!(ModelConfig::from_text(&t, p).is_err());
+        // Point-encoder keys: all needed with point_dim > 0, none allowed without, each
+        // value checked.
+        let kp = ModelConfig::default_kp().to_text();
+        let without = |key: &str| kp.lines().filter(|l| !l.starts_with(key)).collect::<Vec<_>>().join("\n");
+        assert!(ModelConfig::from_text(&without("kp_seed"), p).is_err());
+        assert!(ModelConfig::from_text(&without("kp_"), p).is_err());
+        let def = ModelConfig::default_preset().to_text();
+        assert!(ModelConfig::from_text(&format!("{def}kp_seed = 1\n"), p).is_err());
+        assert!(ModelConfig::from_text(&format!("{kp}kp_seed = 1\n"), p).is_err(), "repeated key");
+        for (from, to) in [
+            ("simple,", "simplex,"),
+            ("kp_input = ones", "kp_input = twos"),
+            ("kp_neighbor_cap = percentile 0.9", "kp_neighbor_cap = some 0.9"),
+            ("kp_first_features_dim = 16", "kp_first_features_dim = 6"),
+            ("kp_first_cell = 0.03", "kp_first_cell = -1"),
+            ("kp_num_kernel_points = 15", "kp_num_kernel_points = 0"),
+        ] {
+            assert!(kp.contains(from), "{from}");
+            assert!(ModelConfig::from_text(&kp.replace(from, to), p).is_err(), "{to}");
+        }
+    }
+
+    /// The shipped weights (written before the point encoder existed) load, and
+    /// re-serialise to the very same bytes: the config text format is unchanged for
+    /// models without a point encoder.
+    #[test]
+    fn shipped_weights_load_and_reserialise_bit_exactly() {
+        let bytes = include_bytes!("../../fixtures/point2quad-default.p2qm");
+        let m = Model::from_bytes(bytes, Path::new("fixture")).unwrap();
+        assert_eq!(m.config(), &ModelConfig::default_preset());
+        assert_eq!(m.to_checkpoint(None).to_bytes(), bytes.to_vec());
     }
 
     #[test]
@@ -398,7 +694,7 @@ mod tests {
     #[test]
     fn paper_model_with_point_features_trains_a_step() {
         let mut model = Model::new(ModelConfig::paper(), 3).unwrap();
-        assert!(model.param_count() > 500_000);
+        assert_eq!(model.param_count(), 24_364_224 + face_and_classifier_params(model.config()));
         let (m, n) = (5usize, 9usize);
         let fin = model.config().face_in();
         let mut rng = Rng::new(4);
@@ -415,5 +711,57 @@ mod tests {
         let mut grads = Grads::new();
         g.backward(loss, &mut grads).unwrap();
         assert!(grads.norm_sq() > 0.0);
+    }
+
+    /// Trainable scalars of the face encoder and classifier alone, counted from the
+    /// config (conv weights, biases only on the head, BN γ and β).
+    fn face_and_classifier_params(c: &ModelConfig) -> usize {
+        let unary = |cin: usize, cout: usize| cin * cout + 2 * cout;
+        let mut n = 0;
+        let mut cin = c.face_in();
+        for &w in &c.face_widths {
+            n += unary(cin, w);
+            cin = w;
+        }
+        n += 2 * unary(c.face_widths[1], c.face_widths[1]);
+        cin = 4 * c.point_dim + c.face_widths[4];
+        for &w in &c.classifier_widths {
+            n += unary(cin, w);
+            cin = w;
+        }
+        n + 2 * cin + 2
+    }
+
+    #[test]
+    fn point_encoder_params_live_in_the_model_store() {
+        let d = Model::new(ModelConfig::default_preset(), 1).unwrap();
+        assert_eq!(d.param_count(), face_and_classifier_params(d.config()));
+        let m = Model::new(ModelConfig::default_kp(), 1).unwrap();
+        let kcfg = m.config().point_encoder.clone().unwrap();
+        assert_eq!(m.param_count(), kcfg.param_count() + face_and_classifier_params(m.config()));
+        let kernels = m.params.ids().filter(|&id| m.params.name(id).ends_with(".kernel_points")).count();
+        assert_eq!(kernels, kcfg.blocks.len());
+        // The seed reaches the point encoder too.
+        let other = Model::new(ModelConfig::default_kp(), 2).unwrap();
+        let w = m.params.find("kpfcnn.enc0.kpconv.weight").unwrap();
+        assert_ne!(m.params.get(w).data(), other.params.get(w).data());
+    }
+
+    #[test]
+    fn inconsistent_point_configs_are_errors() {
+        let no_encoder = ModelConfig { point_encoder: None, ..ModelConfig::default_kp() };
+        assert!(Model::new(no_encoder, 0).is_err());
+        let no_dim = ModelConfig { point_dim: 0, ..ModelConfig::default_kp() };
+        assert!(Model::new(no_dim, 0).is_err());
+        let mismatch = ModelConfig { point_dim: 8, ..ModelConfig::default_kp() };
+        assert!(Model::new(mismatch, 0).is_err());
+        // predict refuses a point model; predict_with_points checks the corners.
+        let m = Model::new(ModelConfig::default_kp(), 0).unwrap();
+        let fin = m.config().face_in();
+        let pts = [[0.0f32, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0], [0.1, 0.1, 0.0]];
+        assert!(m.predict(&vec![0.0; fin]).is_err());
+        assert!(m.predict_with_points(&pts, &[[0, 1, 2, 4]], &vec![0.0; fin]).is_err());
+        assert!(m.predict_with_points(&pts, &[[0, 1, 2, 3]; 2], &vec![0.0; fin]).is_err());
+        assert_eq!(m.predict_with_points(&pts, &[], &[]).unwrap(), Vec::<f32>::new());
     }
 }

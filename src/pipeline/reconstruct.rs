@@ -1,6 +1,7 @@
 //! Reconstruction, end to end and in memory (the embedder's entry point; no file
 //! I/O): validate and normalise the cloud, propose candidate quads, compute their
-//! features, classify them, post-process the faces predicted real into a manifold
+//! features, classify them (with the point encoder's features of their corners when
+//! the model has one), post-process the faces predicted real into a manifold
 //! pure-quad mesh. The output's vertices are the input points, bit-identical and in
 //! order (unused ones stay as isolated vertices, so indices match the input), then any
 //! vertices the hole filling added (mapped back to the input's frame).
@@ -89,7 +90,9 @@ pub fn reconstruct_with_report(
     clock.lap(&mut report, "candidates");
     let x = face_input(&local, &cands, model.config().use_context);
     clock.lap(&mut report, "features");
-    let probs = model.predict(&x)?;
+    // The point encoder (if the model has one) reads the same normalised cloud the
+    // candidates were built in, as in training.
+    let probs = model.predict_with_points(&local, &cands.quads, &x)?;
     clock.lap(&mut report, "classify");
     let mut faces = Vec::new();
     let mut face_probs = Vec::new();

@@ -7,15 +7,23 @@
 //! Augmentation: a uniformly random rotation per step, applied to the vector-valued
 //! F_info columns (the 4 relative corner positions and the 4 corner normals) — the
 //! exact effect of rotating the cloud, since F_info's scalars (scaled Jacobian,
-//! sines) and the context features are rotation invariant. Anisotropic scaling and
-//! fresh noise would need new candidates; they come from the dataset instead
-//! (`point2quad dataset` draws noise per sample).
+//! sines) and the context features are rotation invariant — and, for a model with a
+//! point encoder, to the sample's points before the KPFCNN pyramid is built (about the
+//! frame's origin, the cloud's centroid; grid subsampling is not rotation invariant, so
+//! the pyramid is rebuilt every step). Anisotropic scaling and fresh noise would need
+//! new candidates; they come from the dataset instead (`point2quad dataset` draws noise
+//! per sample).
+//!
+//! With a point encoder each step runs the KPFCNN over all the sample's points (batch
+//! norm in train mode over them) and gathers the features of the drawn candidates'
+//! corners; evaluation uses running statistics, as `reconstruct` does.
 
 use crate::nn::checkpoint::TrainState;
+use crate::nn::kpfcnn::prepare;
 use crate::nn::loss::{face_loss, weighted_cross_entropy};
 use crate::nn::optim::{ExpDecay, Sgd, SgdConfig};
 use crate::pipeline::dataset::Sample;
-use crate::pipeline::model::Model;
+use crate::pipeline::model::{check_corners, corner_indices, Model};
 use crate::rng::Rng;
 use crate::tensor::{Grads, Graph, Tensor};
 use crate::{Error, Result};
@@ -132,7 +140,10 @@ pub fn auto_pos_weight(samples: &[Sample]) -> f32 {
     }
 }
 
-fn check_samples(samples: &[Sample], fin: usize) -> Result<()> {
+/// Checks that every sample fits `model`: enough features per candidate, and, with a
+/// point encoder, corner indices within the sample's points.
+fn check_samples(samples: &[Sample], model: &Model) -> Result<()> {
+    let fin = model.config().face_in();
     for s in samples {
         if (s.feature_dim as usize) < fin {
             return Err(Error::invalid(format!(
@@ -140,8 +151,20 @@ fn check_samples(samples: &[Sample], fin: usize) -> Result<()> {
                 s.name, s.feature_dim
             )));
         }
+        if model.config().point_dim > 0 {
+            check_corners(&s.candidates, s.points.len())
+                .map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))?;
+        }
     }
     Ok(())
+}
+
+/// `points` rotated by `r` (in f64, rounded back to f32, as F_info's vectors are).
+fn rotate_points(points: &[[f32; 3]], r: &[[f64; 3]; 3]) -> Vec<[f32; 3]> {
+    points
+        .iter()
+        .map(|p| crate::math::to_f32(crate::math::mat_vec(r, [p[0] as f64, p[1] as f64, p[2] as f64])))
+        .collect()
 }
 
 /// The first `fin` columns of candidate `c`'s feature row (samples store F_info then
@@ -172,10 +195,13 @@ fn rotate_row(row: &mut [f32], r: &[[f64; 3]; 3]) {
 /// # Errors
 /// Shape errors when a sample's features do not fit the model.
 pub fn evaluate(model: &Model, samples: &[Sample], threshold: f32) -> Result<ClassStats> {
-    check_samples(samples, model.config().face_in())?;
+    check_samples(samples, model)?;
     let mut st = ClassStats::default();
     for s in samples {
-        let p = model.predict(&sample_input(s, model.config().face_in()))?;
+        let x = sample_input(s, model.config().face_in());
+        let p = model
+            .predict_with_points(&s.points, &s.candidates, &x)
+            .map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))?;
         for (&pi, &y) in p.iter().zip(&s.labels) {
             match (pi > threshold, y == 1) {
                 (true, true) => st.tp += 1,
@@ -206,8 +232,8 @@ pub fn train(
     checkpoint: &mut dyn FnMut(&Model, &TrainState) -> Result<()>,
 ) -> Result<Vec<EpochReport>> {
     let fin = model.config().face_in();
-    check_samples(train, fin)?;
-    check_samples(val, fin)?;
+    check_samples(train, model)?;
+    check_samples(val, model)?;
     let usable: Vec<usize> = (0..train.len()).filter(|&i| !train[i].labels.is_empty()).collect();
     if usable.is_empty() {
         return Err(Error::invalid("no training sample has candidates"));
@@ -251,9 +277,29 @@ pub fn train(
                 labels.push(s.labels[c]);
             }
             let Model { net, params } = &mut *model;
+            let pyramid = match net.point_encoder() {
+                Some(kp) => {
+                    let pts = match &rot {
+                        Some(r) => prepare(&rotate_points(&s.points, r), kp.config()),
+                        None => prepare(&s.points, kp.config()),
+                    };
+                    Some(pts.map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))?)
+                }
+                None => None,
+            };
             let mut g = Graph::train(params);
+            let point = match (net.point_encoder(), &pyramid) {
+                (Some(kp), Some(pyr)) => {
+                    let pf = kp
+                        .forward(&mut g, pyr)
+                        .map_err(|e| Error::invalid(format!("sample {}: point encoder: {e}", s.name)))?;
+                    let corners: Vec<[u32; 4]> = pick.iter().map(|&c| s.candidates[c]).collect();
+                    Some((pf, corner_indices(&corners)))
+                }
+                _ => None,
+            };
             let xv = g.input(Tensor::new(&[pick.len(), fin], x)?);
-            let logits = net.forward(&mut g, xv, None)?;
+            let logits = net.forward(&mut g, xv, point)?;
             let ce = weighted_cross_entropy(&mut g, logits, &labels, pos_weight)?;
             let fl = face_loss(&mut g, logits, &labels)?;
             let fl = g.scale(fl, cfg.face_loss_weight)?;

@@ -31,7 +31,14 @@ atomically. Progress goes to stderr.
 OPTIONS:
     --data DIR            dataset folder (required)
     --out MODEL           output weights file (required)
-    --config NAME         model preset: default (2-core friendly) or paper [default]
+    --config NAME         model preset [default]:
+                            default     face encoder + classifier (2-core friendly;
+                                        the shipped weights)
+                            default_kp  default + a small KPConv point encoder
+                                        (KPFCNN, 3 levels, 32 features per point)
+                            paper       the paper's widths and KPFCNN (24.4M
+                                        parameters; slow on a CPU)
+                          (ignored with --resume: the checkpoint holds its config)
     --epochs N            total epochs (a resumed run continues up to N) [40]
     --resume CKPT         continue exactly from a MODEL.ckpt written earlier
     --seed S              training seed [0]
@@ -111,12 +118,6 @@ pub fn run(argv: &[String]) -> Result<()> {
         }
         None => (Model::new(ModelConfig::preset(a.value("--config").unwrap_or("default"))?, cfg.seed)?, None),
     };
-    if model.config().point_dim > 0 {
-        return Err(Error::Usage(format!(
-            "train: preset '{}' needs the KPConv point encoder, which is not wired into training yet; use --config default",
-            model.config().preset
-        )));
-    }
 
     let t0 = std::time::Instant::now();
     let samples = load_dir(&data)?;

@@ -28,7 +28,7 @@ COMMANDS:
     candidates   INPUT -o CAND.txt         candidate quads, 4 zero-based indices per line
     eval         PRED --gt GT [--json]     mesh quality and accuracy metrics
     dataset      --out DIR [--synthetic N] [--meshes DIR] [--noise 0.1] [--seed S]
-    train        --data DIR --out MODEL [--config default|paper] [--epochs N] [--resume CKPT]
+    train        --data DIR --out MODEL [--config default|default_kp|paper] [--epochs N] [--resume CKPT]
     repair       MESH -o OUT.{obj,ply,off} post-process and hole-fill a quad mesh or face soup
     render       MESH -o OUT.svg           shaded SVG picture of a mesh
     synth        -o CLOUD.xyz [--gt GT.obj] synthetic noisy cloud + ground-truth quad mesh

@@ -339,3 +339,36 @@ pub fn train(
     }
     Ok(reports)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::candidates::{generate, CandidateConfig};
+    use crate::pipeline::features::{face_input, F_INFO_DIM};
+
+    /// The augmentation rotates the points (what the point encoder sees) and F_info's
+    /// vectors by the same rotation: F_info recomputed from the rotated points equals the
+    /// rotated F_info (a transposed or different rotation would not).
+    #[test]
+    fn point_rotation_matches_f_info_rotation() {
+        let mesh = crate::mesh::shapes::torus(12, 6, 1.0, 0.4);
+        let pts: Vec<[f32; 3]> = mesh.vertices.iter().map(|&p| crate::math::to_f32(p)).collect();
+        let cands =
+            generate(&pts, &CandidateConfig { k: 12, per_point: 6, ..CandidateConfig::default() }).unwrap();
+        assert!(cands.len() > 50);
+        let r = Rng::new(3).rotation();
+        let rotated_pts = rotate_points(&pts, &r);
+        let want = face_input(&rotated_pts, &cands, false);
+        let mut got = face_input(&pts, &cands, false);
+        let mut moved = 0.0f32;
+        for (row, want_row) in got.chunks_exact_mut(F_INFO_DIM).zip(want.chunks_exact(F_INFO_DIM)) {
+            let before = row.to_vec();
+            rotate_row(row, &r);
+            for (j, (a, b)) in row.iter().zip(want_row).enumerate() {
+                assert!((a - b).abs() <= 1e-4 * (1.0 + b.abs()), "column {j}: {a} vs {b}");
+                moved = moved.max((before[j] - b).abs());
+            }
+        }
+        assert!(moved > 0.1, "the rotation moved nothing: the check could not fail");
+    }
+}

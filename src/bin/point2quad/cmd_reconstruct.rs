@@ -22,7 +22,8 @@ vertices), then any vertices hole filling added.
 
 OPTIONS:
     -o, --output OUT      output mesh; format from the extension (required)
-    --model FILE          weights written by `point2quad train` [the shipped weights]
+    --model FILE          weights written by `point2quad train`, any preset
+                          [the shipped weights]
     --svg PREVIEW.svg     also write a shaded SVG picture of the result
     --no-postprocess      write the faces the network predicts, unrepaired
                           (may be non-manifold: the paper's raw output)

@@ -36,7 +36,7 @@ OPTIONS:
                                         the shipped weights)
                             default_kp  default + a small KPConv point encoder
                                         (KPFCNN, 3 levels, 32 features per point)
-                            paper       the paper's widths and KPFCNN (24.4M
+                            paper       the paper's widths and KPFCNN (25.2M
                                         parameters; slow on a CPU)
                           (ignored with --resume: the checkpoint holds its config)
     --epochs N            total epochs (a resumed run continues up to N) [40]

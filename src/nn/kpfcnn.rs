@@ -11,7 +11,8 @@
 //! strided, shadow slots counting as a zero feature as in the authors' code), then LeakyReLU.
 //! Neighbour caps are calibrated per cloud in [`prepare`] (the authors calibrate once over their
 //! training batches); with sum aggregation a different cap only changes which far neighbours of
-//! the densest 10% of points are dropped.
+//! the densest 10% of points are dropped. Each KPConv's kernel points are also stored as a buffer
+//! (`….kpconv.kernel_points`) so that checkpoints carry them ([`Kpfcnn::load_kernel_points`]).
 //!
 //! | preset | blocks | widths | levels (cells) | parameters |
 //! |---|---|---|---|---|

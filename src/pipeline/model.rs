@@ -8,9 +8,13 @@
 //! [Z_P×4 ; Z_F] ─ classifier: (conv1d+BN+ReLU) × 4, conv1d → 2 logits (column 1 = "face is real")
 //! ```
 //!
-//! One [`ModelConfig`] describes the whole network; the presets `paper` and `default`
-//! differ only in its numbers. The config is stored as `key = value` text inside the
-//! checkpoint, so a weights file is self-describing.
+//! One [`ModelConfig`] describes the whole network; the presets ([`PRESETS`]: `default`
+//! without point encoder, `default_kp` with a small KPFCNN, `paper`) differ only in its
+//! numbers. The config is stored as `key = value` text inside the checkpoint, so a weights
+//! file is self-describing; the point encoder's parameters, batch-norm statistics and kernel
+//! points are tensors of the same [`ParamStore`], so checkpoints, the optimiser and resuming
+//! cover them. The point encoder reads the cloud in the normalised frame the candidates were
+//! built in ([`Model::predict_with_points`]).
 
 use crate::nn::batch_norm::BatchNormConfig;
 use crate::nn::checkpoint::{self, Checkpoint, TrainState};

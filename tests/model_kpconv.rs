@@ -289,6 +289,31 @@ fn reconstruct_with_a_point_encoder_gives_a_valid_mesh() {
     }
 }
 
+/// Tiny and degenerate clouds through a point-encoder model: a valid mesh or a clean error,
+/// never a panic (the KPFCNN sees pyramids of a few points, duplicates, a flat or collinear
+/// cloud). With threshold 0 the square, its duplicate and the flat grid give faces.
+#[test]
+fn tiny_and_degenerate_clouds_do_not_panic() {
+    let model = Model::new(ModelConfig::default_kp(), 1).unwrap();
+    let square = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+    let mut dup = square.clone();
+    dup.extend(square.iter().copied());
+    let line: Vec<[f64; 3]> = (0..6).map(|i| [i as f64, 0.0, 0.0]).collect();
+    let flat: Vec<[f64; 3]> = (0..25).map(|i| [(i % 5) as f64, (i / 5) as f64, 0.0]).collect();
+    let mut faces = 0;
+    for (name, pts) in [("square", square), ("duplicates", dup), ("line", line), ("flat", flat)] {
+        let cfg = ReconstructConfig { threshold: 0.0, ..ReconstructConfig::default() };
+        match reconstruct(&pts, &model, &cfg) {
+            Ok(mesh) => {
+                assert_valid(&mesh, &pts);
+                faces += mesh.quads.len();
+            }
+            Err(e) => assert!(!e.to_string().is_empty(), "{name}"),
+        }
+    }
+    assert!(faces > 0, "no cloud reached the point encoder");
+}
+
 // ---- The CLI ----
 
 struct Scratch(std::path::PathBuf);

@@ -193,7 +193,8 @@ fn rotate_row(row: &mut [f32], r: &[[f64; 3]; 3]) {
 /// Classifies every candidate of `samples` (inference mode) and counts against labels.
 ///
 /// # Errors
-/// Shape errors when a sample's features do not fit the model.
+/// `InvalidInput` naming the sample when its features or candidates do not fit the
+/// model, or its cloud cannot be encoded.
 pub fn evaluate(model: &Model, samples: &[Sample], threshold: f32) -> Result<ClassStats> {
     check_samples(samples, model)?;
     let mut st = ClassStats::default();

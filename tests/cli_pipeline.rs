@@ -117,7 +117,7 @@ fn synth_dataset_train_reconstruct_eval_end_to_end() {
     ok(&["synth", "--from", &s.p("meshes/a_sphere.obj"), "-o", &cloud, "--gt", &gt, "--seed", "5"]);
     let (mesh, svg) = (s.p("out.obj"), s.p("out.svg"));
     // One epoch on three tiny meshes predicts (almost) nothing real at 0.5, and an
-    // empty prediction is refused by `eval`; threshold 0 hands every candidate to the
+    // empty prediction would only score 0; threshold 0 hands every candidate to the
     // post-process, which must still produce a valid mesh.
     let out = ok(&["reconstruct", &cloud, "-o", &mesh, "--model", &model, "--svg", &svg, "--threshold", "0"]);
     let err = String::from_utf8_lossy(&out.stderr);

@@ -75,20 +75,31 @@ pub struct MeshMetrics {
 }
 
 /// Accuracy against a ground-truth mesh (DESIGN §7). All values are finite.
+///
+/// An empty prediction (no faces, or no face with a finite vertex: nothing to sample)
+/// is a result, not an error: precision 0 (0 of 0 predicted faces is undefined, and
+/// scored 0 so that no output never looks accurate), recall 0, and the three Chamfer
+/// figures `None` (the distance from the ground truth to an empty set is unbounded;
+/// no finite number would be honest). [`GtMetrics::empty_prediction`] says so.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GtMetrics {
     /// Chamfer distance as in the paper (Eq. 14): the SUM of the two one-sided mean
     /// nearest distances, `chamfer_pred_to_gt + chamfer_gt_to_pred`, in units of the
-    /// ground truth's bounding-box diagonal.
-    pub chamfer: f64,
-    /// Mean distance from each predicted sample to its nearest ground-truth sample.
-    pub chamfer_pred_to_gt: f64,
-    /// Mean distance from each ground-truth sample to its nearest predicted sample.
-    pub chamfer_gt_to_pred: f64,
+    /// ground truth's bounding-box diagonal. `None` for an empty prediction.
+    pub chamfer: Option<f64>,
+    /// Mean distance from each predicted sample to its nearest ground-truth sample
+    /// (`None` for an empty prediction).
+    pub chamfer_pred_to_gt: Option<f64>,
+    /// Mean distance from each ground-truth sample to its nearest predicted sample
+    /// (`None` for an empty prediction).
+    pub chamfer_gt_to_pred: Option<f64>,
     /// Matched predicted faces / predicted faces (0 when the prediction has no face).
     pub precision: f64,
     /// Distinct ground-truth faces matched / ground-truth faces.
     pub recall: f64,
+    /// True when the prediction had no surface to sample (no face, or no face with a
+    /// finite vertex): precision and recall are 0 and Chamfer is undefined.
+    pub empty_prediction: bool,
     /// Predicted vertices matched to a ground-truth vertex within the tolerance.
     pub matched_vertices: usize,
 }
@@ -456,9 +467,11 @@ fn mean_nearest(from: &[[f64; 3]], to: &[[f64; 3]]) -> f64 {
 /// tolerance, count as one vertex: split seams do not hide faces); a ground-truth face counts as recalled when
 /// some counted predicted face has its vertex set.
 ///
+/// An empty prediction scores as documented on [`GtMetrics`].
+///
 /// # Errors
 /// `InvalidInput` when the ground truth has no face, no finite vertex or a zero
-/// bounding-box diagonal, or when the prediction has no finite face vertex.
+/// bounding-box diagonal.
 pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
     if gt.faces.is_empty() {
         return Err(Error::invalid("ground-truth mesh has no faces"));
@@ -494,11 +507,11 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
 
     let mut rng = Rng::new(seed);
     let (mut rng_pred, mut rng_gt) = (rng.fork(1), rng.fork(2));
-    let sp = sample_surface(&pred_f, CHAMFER_SAMPLES, &mut rng_pred)
-        .ok_or_else(|| Error::invalid("predicted mesh has no finite face vertex to sample"))?;
     let sg = sample_surface(&gt_f, CHAMFER_SAMPLES, &mut rng_gt)
         .ok_or_else(|| Error::invalid("ground-truth mesh has no finite face vertex to sample"))?;
-    let (p2g, g2p) = crate::par::join(|| mean_nearest(&sp, &sg), || mean_nearest(&sg, &sp));
+    // `None`: the prediction has no face with a finite vertex, so nothing to sample.
+    let chamfer_parts = sample_surface(&pred_f, CHAMFER_SAMPLES, &mut rng_pred)
+        .map(|sp| crate::par::join(|| mean_nearest(&sp, &sg), || mean_nearest(&sg, &sp)));
 
     // Vertex matching: nearest ground-truth vertex, accepted within the tolerance
     // (checked in f64).
@@ -551,11 +564,12 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
         }
     }
     Ok(GtMetrics {
-        chamfer: p2g + g2p,
-        chamfer_pred_to_gt: p2g,
-        chamfer_gt_to_pred: g2p,
+        chamfer: chamfer_parts.map(|(p2g, g2p)| p2g + g2p),
+        chamfer_pred_to_gt: chamfer_parts.map(|(p2g, _)| p2g),
+        chamfer_gt_to_pred: chamfer_parts.map(|(_, g2p)| g2p),
         precision: ratio(hits, pred.faces.len()),
         recall: ratio(recalled.iter().filter(|r| **r).count(), gt.faces.len()),
+        empty_prediction: chamfer_parts.is_none(),
         matched_vertices,
     })
 }
@@ -680,8 +694,22 @@ mod tests {
         assert_eq!((m.angle_dev_deg, m.angle_rms_deg, m.scaled_jacobian_min), (0.0, 0.0, 0.0));
         let v = PolyMesh { vertices: vec![[1.0; 3]], faces: vec![] };
         assert_eq!(mesh_metrics(&v).unreferenced_vertices, 1);
-        assert!(compare(&PolyMesh::default(), &cube([0.0; 3]), 0).is_err());
+        // The ground truth must have faces; an empty prediction is scored.
         assert!(compare(&cube([0.0; 3]), &PolyMesh::default(), 0).is_err());
+        let gt = cube([0.0; 3]);
+        let points_only = PolyMesh { vertices: gt.vertices.clone(), faces: vec![] };
+        let nan_faces = PolyMesh { vertices: vec![[f64::NAN; 3]; 4], faces: vec![vec![0, 1, 2, 3]] };
+        for (pred, matched) in [(PolyMesh::default(), 0), (points_only, 8), (nan_faces, 0)] {
+            let r = compare(&pred, &gt, 0).unwrap();
+            assert!(r.empty_prediction, "{r:?}");
+            assert_eq!((r.precision, r.recall, r.matched_vertices), (0.0, 0.0, matched), "{r:?}");
+            assert_eq!((r.chamfer, r.chamfer_pred_to_gt, r.chamfer_gt_to_pred), (None, None, None));
+        }
+        // One real face is not empty: Chamfer is defined, recall 1/6.
+        let one = PolyMesh { vertices: gt.vertices.clone(), faces: vec![gt.faces[0].clone()] };
+        let r = compare(&one, &gt, 0).unwrap();
+        assert!(!r.empty_prediction && r.chamfer.is_some_and(|c| c > 0.0), "{r:?}");
+        assert_eq!((r.precision, r.recall), (1.0, 1.0 / 6.0));
     }
 
     #[test]

@@ -9,7 +9,7 @@ mod quality_common;
 use std::collections::{BTreeMap, BTreeSet};
 
 use point2quad::mesh::poly::PolyMesh;
-use point2quad::mesh::quality::{compare, mesh_metrics, MATCH_TOLERANCE};
+use point2quad::mesh::quality::{compare, is_degenerate_quad, mesh_metrics, quad_shape, MATCH_TOLERANCE};
 use point2quad::rng::Rng;
 use proptest::prelude::*;
 use quality_common::{cube, grid, torus, transform};
@@ -106,6 +106,38 @@ fn close(a: f64, b: f64, rel: f64) -> bool {
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// `is_degenerate_quad` against exact integer arithmetic: corners on a small lattice
+    /// (so coincident corners and collinear or flat-folded quads are common) are
+    /// degenerate iff two corners are equal or the diagonals' cross product is zero; the
+    /// verdict survives any uniform scale and translation; and whatever `quad_shape`
+    /// calls degenerate is degenerate.
+    #[test]
+    fn degenerate_quads_match_exact_arithmetic(
+        corners in prop::array::uniform4(prop::array::uniform3(-2i64..3)),
+        flat in any::<bool>(),
+        scale_exp in -300i32..300, mantissa in 1.0f64..2.0, shift in prop::array::uniform3(-1e2f64..1e2),
+    ) {
+        let mut c = corners;
+        if flat {
+            // Half the cases in the z = 0 plane, where folds and lines are likelier.
+            for p in &mut c { p[2] = 0; }
+        }
+        let sub = |a: [i64; 3], b: [i64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+        let (d1, d2) = (sub(c[2], c[0]), sub(c[3], c[1]));
+        let cross = [d1[1] * d2[2] - d1[2] * d2[1], d1[2] * d2[0] - d1[0] * d2[2], d1[0] * d2[1] - d1[1] * d2[0]];
+        let repeated = (0..4).any(|i| (i + 1..4).any(|j| c[i] == c[j]));
+        let expect = repeated || cross == [0, 0, 0];
+        let k = mantissa * 2f64.powi(scale_exp);
+        let p: [[f64; 3]; 4] = c.map(|q| std::array::from_fn(|a| (q[a] as f64 + shift[a]) * k));
+        let exact: [[f64; 3]; 4] = c.map(|q| q.map(|x| x as f64));
+        prop_assert_eq!(is_degenerate_quad(&exact), expect, "{:?}", c);
+        // Shift then scale rounds the corners a little; the verdict must not move.
+        prop_assert_eq!(is_degenerate_quad(&p), expect, "{:?} shifted by {:?}, scaled by {}", c, shift, k);
+        if quad_shape(&exact).edge_ratio.is_none() {
+            prop_assert!(is_degenerate_quad(&exact));
+        }
+    }
 
     /// Edge counts and non-manifold vertices of random quad soups over few vertices
     /// (so edges get 1, 2, 3+ faces and fans touch) against the references.

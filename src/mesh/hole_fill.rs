@@ -16,6 +16,7 @@ use std::collections::HashMap;
 
 use super::halfedge::HalfedgeMesh;
 use super::handles::{HalfedgeId, VertexId};
+use super::quality::is_degenerate_quad;
 use crate::error::{Error, Result};
 use crate::math::{add, cross, dist_sq, dot, norm, normalize, scale, sub};
 
@@ -191,6 +192,11 @@ impl Filler<'_> {
         } else {
             (self.cfg.min_scaled_jacobian, self.cfg.min_normal_dot)
         };
+        // Never a quad without area, even where pattern 1 accepts any shape: closing a
+        // hole left by a dropped zero-area quad must not put it back.
+        if is_degenerate_quad(p) {
+            return None;
+        }
         let sj = scaled_jacobian(p);
         if sj < min_sj {
             return None;

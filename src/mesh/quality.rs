@@ -235,6 +235,42 @@ pub struct QuadShape {
     pub angles_deg: Option<[f64; 4]>,
 }
 
+/// Relative tolerance of [`is_degenerate_quad`]: far above the rounding of exact
+/// coincidence or collinearity (~1e-16), far below any quad meant to have area.
+pub const DEGENERATE_QUAD_TOL: f64 = 1e-12;
+
+/// True when the quad `p` has no area to speak of: a non-finite corner; two corners at
+/// one position (closer than [`DEGENERATE_QUAD_TOL`] × the quad's diameter, the
+/// largest corner-to-corner distance; all four at one point included); or no vector
+/// area (|(p2 − p0) × (p3 − p1)| ≤ [`DEGENERATE_QUAD_TOL`] × diameter², which covers
+/// four corners on one line and quads folded flat onto themselves). Scale- and
+/// translation-invariant, like [`quad_shape`]; every quad that [`quad_shape`] calls
+/// degenerate (and [`MeshMetrics::degenerate_quads`] counts) is degenerate here too.
+pub fn is_degenerate_quad(p: &[[f64; 3]; 4]) -> bool {
+    if p.iter().flatten().any(|c| !c.is_finite()) {
+        return true;
+    }
+    // The same move-and-scale as `quad_shape`, so exact zeros there are zeros here.
+    let half: [[f64; 3]; 4] = std::array::from_fn(|i| std::array::from_fn(|k| 0.5 * p[i][k] - 0.5 * p[0][k]));
+    let size = half.iter().flatten().fold(0.0f64, |m, c| m.max(c.abs()));
+    if size == 0.0 {
+        return true;
+    }
+    let q: [[f64; 3]; 4] = half.map(|v| v.map(|c| c / size));
+    let mut dist = [0.0f64; 6];
+    let mut k = 0;
+    for i in 0..4 {
+        for j in i + 1..4 {
+            dist[k] = norm(sub(q[i], q[j]));
+            k += 1;
+        }
+    }
+    let diameter = dist.iter().fold(0.0f64, |m, &d| m.max(d));
+    let shortest = dist.iter().fold(f64::INFINITY, |m, &d| m.min(d));
+    let area2 = norm(cross(sub(q[2], q[0]), sub(q[3], q[1])));
+    shortest <= DEGENERATE_QUAD_TOL * diameter || area2 <= DEGENERATE_QUAD_TOL * diameter * diameter
+}
+
 /// Shape measures of the quad `p` (DESIGN §2): e_i = p_{i+1} − p_i,
 /// c_i = e_{i−1} × e_i, n = normalize((p2 − p0) × (p3 − p1)), scaled Jacobian =
 /// min_i (c_i · n) / (|e_{i−1}| |e_i|). A quad with a zero-length edge, an undefined
@@ -683,6 +719,33 @@ mod tests {
         for v in [mm.scaled_jacobian, mm.edge_ratio, mm.angle_dev_deg, mm.angle_rms_deg, mm.watertightness] {
             assert!(v.is_finite());
         }
+    }
+
+    #[test]
+    fn degenerate_quads_by_position() {
+        let sq = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+        assert!(!is_degenerate_quad(&sq));
+        let cases: [[[f64; 3]; 4]; 7] = [
+            [[2.0, 3.0, 4.0]; 4],                                                 // one point
+            [sq[0], sq[0], sq[2], sq[3]],                                         // adjacent repeat
+            [sq[0], sq[1], sq[0], sq[3]],                                         // diagonal repeat
+            [[0.0; 3], [0.1, 0.2, 0.3], [0.2, 0.4, 0.6], [0.3, 0.6, 0.9]],        // collinear, rounded
+            [[0.0; 3], [2.0, 0.0, 0.0], [1.0, 0.0, 0.0], [3.0, 0.0, 0.0]],        // collinear, folded
+            [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [2.0, 0.0, 0.0], [3.0, 1.0, 0.0]], // zigzag: no vector area
+            [sq[0], [f64::NAN, 0.0, 0.0], sq[2], sq[3]],
+        ];
+        for c in &cases {
+            assert!(is_degenerate_quad(c), "{c:?}");
+            // Scale does not rescue or condemn a quad.
+            let big = c.map(|p| p.map(|x| x * 1e200));
+            let tiny = c.map(|p| p.map(|x| x * 1e-200));
+            assert!(is_degenerate_quad(&big) && is_degenerate_quad(&tiny), "{c:?}");
+        }
+        for k in [1e-200, 1e-5, 1e200] {
+            assert!(!is_degenerate_quad(&sq.map(|p| p.map(|x| x * k + 7.0 * k))));
+        }
+        // A thin but real sliver (aspect 1e-6) keeps its area.
+        assert!(!is_degenerate_quad(&[[0.0; 3], [1.0, 0.0, 0.0], [1.0, 1e-6, 0.0], [0.0, 1e-6, 0.0]]));
     }
 
     #[test]

@@ -3,27 +3,15 @@
 //! (and a 20-digit value) is a usage error (exit 2) naming the option, the bounds and the
 //! value, before any file is read or written.
 
-use std::path::PathBuf;
+#[path = "common/scratch.rs"]
+mod scratch;
+
 use std::process::{Command, Output};
+
+use scratch::Scratch;
 
 fn p2q(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_point2quad")).args(args).output().expect("test: run the binary")
-}
-
-fn scratch() -> PathBuf {
-    let d = std::env::temp_dir().join(format!("p2q_cli_bounds_{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("test: scratch dir");
-    d
-}
-
-fn entries(d: &PathBuf) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(d)
-        .expect("test: list scratch")
-        .map(|e| e.expect("test: entry").file_name().to_string_lossy().into_owned())
-        .collect();
-    v.sort();
-    v
 }
 
 /// A gently curved 6 × 5 sheet of points, as .xyz text (small: at k = 64 every point
@@ -41,17 +29,11 @@ fn sheet() -> String {
 
 #[test]
 fn work_sizing_options_are_bounded() {
-    let dir = scratch();
-    let cloud = dir.join("sheet.xyz");
-    std::fs::write(&cloud, sheet()).expect("test: write cloud");
-    let (c, cand, mesh) = (
-        cloud.to_str().unwrap(),
-        dir.join("c.txt").display().to_string(),
-        dir.join("m.obj").display().to_string(),
-    );
-    let ds = dir.join("ds").display().to_string();
+    let dir = Scratch::new("cli_bounds");
+    let c = &dir.write("sheet.xyz", sheet().as_bytes());
+    let (cand, mesh, ds) = (dir.p("c.txt"), dir.p("m.obj"), dir.p("ds"));
     let huge = "18446744073709551615"; // usize::MAX: `8 * per_point` overflowed before
-    let before = entries(&dir);
+    let before = dir.entries();
     let refused: Vec<(Vec<&str>, &str, &str)> = vec![
         (vec!["candidates", c, "-o", &cand, "--k", "65"], "--k must be between 3 and 64", "65"),
         (vec!["candidates", c, "-o", &cand, "--k", "2"], "--k must be between 3 and 64", "2"),
@@ -90,7 +72,7 @@ fn work_sizing_options_are_bounded() {
         assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains(msg) && err.contains(&format!("got {value}")), "{args:?}: {err}");
         assert!(!err.contains("panicked"), "{args:?}: {err}");
-        assert_eq!(entries(&dir), before, "{args:?}: files left behind");
+        assert_eq!(dir.entries(), before, "{args:?}: files left behind");
     }
     // The bounds themselves are accepted and do the work.
     for args in [
@@ -105,5 +87,4 @@ fn work_sizing_options_are_bounded() {
             assert!(idx.len() == 4 && idx.iter().all(|&i| i < 30), "{line}");
         }
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -5,42 +5,18 @@
 
 #[path = "common/quality.rs"]
 mod quality_common;
+#[path = "common/scratch.rs"]
+mod scratch;
 
 use point2quad::mesh::halfedge::HalfedgeMesh;
 use point2quad::mesh::poly::PolyMesh;
 use point2quad::mesh::shapes;
 use point2quad::mesh::validate::validate;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use quality_common::{parse_json, Json};
-
-/// A unique scratch folder, removed on drop.
-struct Scratch(PathBuf);
-
-impl Scratch {
-    fn new(tag: &str) -> Scratch {
-        static N: AtomicU64 = AtomicU64::new(0);
-        let d = std::env::temp_dir().join(format!(
-            "p2q_cli_pipeline_{tag}_{}_{}",
-            std::process::id(),
-            N.fetch_add(1, Ordering::Relaxed)
-        ));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).expect("test: scratch dir");
-        Scratch(d)
-    }
-    fn p(&self, name: &str) -> String {
-        self.0.join(name).display().to_string()
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
+use scratch::Scratch;
 
 /// Runs the binary; asserts no panic text whatever the outcome.
 fn run(args: &[&str]) -> Output {

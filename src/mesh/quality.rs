@@ -235,6 +235,20 @@ pub struct QuadShape {
     pub angles_deg: Option<[f64; 4]>,
 }
 
+/// The quad moved to p0 and scaled so its largest coordinate offset is 1; `None` for a
+/// non-finite corner or all four corners at one point. Every shape measure is invariant
+/// under translation and uniform scale, and in this frame a huge (1e200) or tiny
+/// (1e-200) but finite quad does not overflow or underflow in squared lengths (and get
+/// called degenerate). Halving first keeps the differences themselves finite.
+fn unit_quad(p: &[[f64; 3]; 4]) -> Option<[[f64; 3]; 4]> {
+    if p.iter().flatten().any(|c| !c.is_finite()) {
+        return None;
+    }
+    let half: [[f64; 3]; 4] = std::array::from_fn(|i| std::array::from_fn(|k| 0.5 * p[i][k] - 0.5 * p[0][k]));
+    let size = half.iter().flatten().fold(0.0f64, |m, c| m.max(c.abs()));
+    (size > 0.0).then(|| half.map(|q| q.map(|c| c / size)))
+}
+
 /// Relative tolerance of [`is_degenerate_quad`]: far above the rounding of exact
 /// coincidence or collinearity (~1e-16), far below any quad meant to have area.
 pub const DEGENERATE_QUAD_TOL: f64 = 1e-12;
@@ -247,16 +261,8 @@ pub const DEGENERATE_QUAD_TOL: f64 = 1e-12;
 /// translation-invariant, like [`quad_shape`]; every quad that [`quad_shape`] calls
 /// degenerate (and [`MeshMetrics::degenerate_quads`] counts) is degenerate here too.
 pub fn is_degenerate_quad(p: &[[f64; 3]; 4]) -> bool {
-    if p.iter().flatten().any(|c| !c.is_finite()) {
-        return true;
-    }
-    // The same move-and-scale as `quad_shape`, so exact zeros there are zeros here.
-    let half: [[f64; 3]; 4] = std::array::from_fn(|i| std::array::from_fn(|k| 0.5 * p[i][k] - 0.5 * p[0][k]));
-    let size = half.iter().flatten().fold(0.0f64, |m, c| m.max(c.abs()));
-    if size == 0.0 {
-        return true;
-    }
-    let q: [[f64; 3]; 4] = half.map(|v| v.map(|c| c / size));
+    // The same frame as `quad_shape`, so exact zeros there are zeros here.
+    let Some(q) = unit_quad(p) else { return true };
     let mut dist = [0.0f64; 6];
     let mut k = 0;
     for i in 0..4 {
@@ -278,19 +284,7 @@ pub fn is_degenerate_quad(p: &[[f64; 3]; 4]) -> bool {
 /// the element's Jacobian vanishes), no edge ratio, no angles.
 pub fn quad_shape(p: &[[f64; 3]; 4]) -> QuadShape {
     const DEGENERATE: QuadShape = QuadShape { scaled_jacobian: 0.0, edge_ratio: None, angles_deg: None };
-    if p.iter().flatten().any(|c| !c.is_finite()) {
-        return DEGENERATE;
-    }
-    // Every measure is invariant under translation and uniform scale, so work on the
-    // quad moved to p0 and scaled to unit size: a huge (1e200) or tiny (1e-200) but
-    // finite quad would otherwise overflow or underflow in the squared lengths and be
-    // called degenerate. Halving first keeps the differences themselves finite.
-    let half: [[f64; 3]; 4] = std::array::from_fn(|i| std::array::from_fn(|k| 0.5 * p[i][k] - 0.5 * p[0][k]));
-    let size = half.iter().flatten().fold(0.0f64, |m, c| m.max(c.abs()));
-    if size == 0.0 {
-        return DEGENERATE;
-    }
-    let p: [[f64; 3]; 4] = half.map(|q| q.map(|c| c / size));
+    let Some(p) = unit_quad(p) else { return DEGENERATE };
     let e: [[f64; 3]; 4] = std::array::from_fn(|i| sub(p[(i + 1) % 4], p[i]));
     let len: [f64; 4] = std::array::from_fn(|i| norm(e[i]));
     if len.iter().any(|&l| !(l > 0.0 && l.is_finite())) {
@@ -624,20 +618,7 @@ mod tests {
 
     /// An open nu × nv grid of unit quads in the z = 0 plane.
     fn grid(nu: u32, nv: u32) -> PolyMesh {
-        let mut vertices = Vec::new();
-        for j in 0..=nv {
-            for i in 0..=nu {
-                vertices.push([i as f64, j as f64, 0.0]);
-            }
-        }
-        let id = |i: u32, j: u32| j * (nu + 1) + i;
-        let mut faces = Vec::new();
-        for j in 0..nv {
-            for i in 0..nu {
-                faces.push(vec![id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
-        PolyMesh { vertices, faces }
+        PolyMesh::from(&crate::mesh::shapes::grid(nu as usize, nv as usize, nu as f64, nv as f64))
     }
 
     /// Closed unit cube, outward-facing quads, offset by `o`.

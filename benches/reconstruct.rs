@@ -5,9 +5,11 @@
 //! (`pipeline::noise`, default config, seed 1) — the same cloud as `benches/candidates.rs`.
 //!
 //! Prints `bench reconstruct_10k <ms> ms`, the median wall time of several runs after a
-//! warm-up, then `bench reconstruct_10k_peak_rss <MiB> MiB`, the process's peak resident set
-//! (`VmHWM` of `/proc/self/status`; where that is unavailable a note goes to stderr and the line
-//! is left out). The peak covers the whole process: the cloud, the model and the largest run.
+//! warm-up; `bench reconstruct_10k_cpu <ms> ms`, the mean process CPU time (user + system,
+//! all threads) per timed run, which other programs sharing the cores disturb far less than
+//! wall time (Linux only, like the next line); then `bench reconstruct_10k_peak_rss <MiB> MiB`,
+//! the process's peak resident set (`VmHWM` of `/proc/self/status`; where that is unavailable
+//! a note goes to stderr and the line is left out). The peak covers the whole process: the cloud, the model and the largest run.
 //! The per-stage medians of `reconstruct_with_report`'s timings go to stderr (they are not
 //! `bench` lines: scripts read only the two names above). Threads follow `RAYON_NUM_THREADS`.
 
@@ -23,6 +25,15 @@ use std::time::Instant;
 const RUNS: usize = 5;
 
 const SHIPPED_WEIGHTS: &[u8] = include_bytes!("../fixtures/point2quad-default.p2qm");
+
+/// Process CPU time (user + system, all threads) in ms from `/proc/self/stat`, whose clock ticks
+/// are `USER_HZ` = 100 per second on Linux; `None` elsewhere.
+fn cpu_ms() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    let ticks: u64 = fields.get(11)?.parse::<u64>().ok()? + fields.get(12)?.parse::<u64>().ok()?;
+    Some(ticks as f64 * 10.0)
+}
 
 /// Peak resident set in MiB from `VmHWM` of `/proc/self/status` (Linux); `None` elsewhere.
 fn peak_rss_mib() -> Option<f64> {
@@ -52,11 +63,13 @@ fn main() {
 
     let mut wall = Vec::with_capacity(RUNS);
     let mut stages: Vec<(&'static str, Vec<f64>)> = Vec::new();
+    let cpu0 = cpu_ms();
     for _ in 0..RUNS {
         let s = Instant::now();
         black_box(reconstruct(black_box(&cloud), &model, &cfg).expect("bench: reconstruct"));
         wall.push(s.elapsed().as_secs_f64() * 1e3);
     }
+    let cpu = cpu0.zip(cpu_ms()).map(|(a, b)| (b - a) / RUNS as f64);
     // Stage timings come from separate runs so the timed runs above go through the plain
     // `reconstruct` entry point, as an embedder calls it.
     for _ in 0..RUNS {
@@ -82,6 +95,9 @@ fn main() {
         eprintln!("reconstruct bench: stage {name:<12} {:.1} ms (median)", median(t));
     }
     println!("bench reconstruct_10k {:.1} ms", median(wall));
+    if let Some(c) = cpu {
+        println!("bench reconstruct_10k_cpu {c:.1} ms");
+    }
     match peak_rss_mib() {
         Some(mib) => println!("bench reconstruct_10k_peak_rss {mib:.1} MiB"),
         None => eprintln!(

@@ -82,6 +82,7 @@ bench:
 	$(CARGO) bench --bench kpfcnn
 	$(CARGO) bench --bench candidates
 	$(CARGO) bench --bench train_step
+	$(CARGO) bench --bench reconstruct
 
 # The full candidate-coverage measurement (all train meshes, clean and noisy, plus the
 # synthetic shapes); make test runs the same test on a subset of the train meshes.

@@ -36,12 +36,13 @@ print("| mesh | " + " | ".join(k[1] for k in keys) + " | GT SJ | quad only | s |
 print("|---" * (len(keys) + 4) + "|")
 for r in ok:
     p = r["pred"]
-    cells = [f"{p[k]:.4f}" if isinstance(p[k], float) else str(p[k]) for k, _ in keys]
+    # `null` (Chamfer of an empty prediction) is undefined: n/a, here and in the mean.
+    cells = [f"{p[k]:.4f}" if isinstance(p[k], float) else "n/a" if p[k] is None else str(p[k]) for k, _ in keys]
     print(f"| {r['name']} | " + " | ".join(cells) + f" | {r['gt']['scaled_jacobian']:.4f} | {p['quad_only']} | {r['seconds']:.1f} |")
 n = len(ok)
 if n:
-    mean = lambda k: sum(r["pred"][k] for r in ok) / n
-    cells = [f"{mean(k):.4f}" for k, _ in keys]
+    vals = lambda k: [r["pred"][k] for r in ok]
+    cells = ["n/a" if None in vals(k) else f"{sum(vals(k)) / n:.4f}" for k, _ in keys]
     gsj = sum(r["gt"]["scaled_jacobian"] for r in ok) / n
     allq = all(r["pred"]["quad_only"] for r in ok)
     print(f"| **mean of {n}** | " + " | ".join(cells) + f" | {gsj:.4f} | {allq} | {sum(r['seconds'] for r in ok)/n:.1f} |")

@@ -17,6 +17,7 @@
 mod cands_common;
 
 use cands_common::*;
+use point2quad::mesh::poly::QuadMesh;
 use point2quad::mesh::shapes::{random_shape_of, Family};
 use point2quad::pipeline::candidates::CandidateConfig;
 
@@ -37,6 +38,39 @@ fn summarise(name: &str, rows: &[(String, Cov)]) -> (f64, f64, f64, f64) {
         all.secs
     );
     (all.ratio(), mean, all.per_point(), worst)
+}
+
+/// Coverage of `mesh`'s faces by the candidates of its vertices (clean) and of its
+/// vertices plus 10% noise points (noisy, seed 1): one table row, one entry in each list.
+fn measure(
+    name: String,
+    mesh: &QuadMesh,
+    cfg: &CandidateConfig,
+    clean: &mut Vec<(String, Cov)>,
+    noisy: &mut Vec<(String, Cov)>,
+) {
+    let (c, _) = coverage(&mesh.vertices, &mesh.quads, cfg);
+    let (n, _) = coverage(&noisy_cloud(mesh, 1), &mesh.quads, cfg);
+    println!(
+        "{name:24} {:7} {:9.4} {:7.2} | {:9.4} {:7.2}",
+        c.faces,
+        c.ratio(),
+        c.per_point(),
+        n.ratio(),
+        n.per_point()
+    );
+    clean.push((name.clone(), c));
+    noisy.push((name, n));
+}
+
+/// Prints the clean and noisy aggregates of `set` and asserts them against the floors
+/// (and the candidates per point against [`MAX_PER_POINT`]).
+fn check(set: &str, clean: &[(String, Cov)], noisy: &[(String, Cov)], clean_min: f64, noisy_min: f64) {
+    let (c_all, _, c_pp, _) = summarise(&format!("{set} clean"), clean);
+    let (n_all, _, n_pp, _) = summarise(&format!("{set} noisy"), noisy);
+    assert!(c_all >= clean_min, "clean coverage {c_all:.4} < {clean_min}");
+    assert!(n_all >= noisy_min, "noisy coverage {n_all:.4} < {noisy_min}");
+    assert!(c_pp <= MAX_PER_POINT && n_pp <= MAX_PER_POINT, "{c_pp:.2} / {n_pp:.2} candidates per point");
 }
 
 /// Whether the full train measurement is asked for (`P2Q_FULL_COVERAGE` set to
@@ -73,25 +107,9 @@ fn coverage_on_train_meshes_clean_and_noisy() {
     );
     for path in &files {
         let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        let mesh = load_quad_mesh(path);
-        let (c, _) = coverage(&mesh.vertices, &mesh.quads, &cfg);
-        let (n, _) = coverage(&noisy_cloud(&mesh, 1), &mesh.quads, &cfg);
-        println!(
-            "{name:24} {:7} {:9.4} {:7.2} | {:9.4} {:7.2}",
-            c.faces,
-            c.ratio(),
-            c.per_point(),
-            n.ratio(),
-            n.per_point()
-        );
-        clean.push((name.clone(), c));
-        noisy.push((name, n));
+        measure(name, &load_quad_mesh(path), &cfg, &mut clean, &mut noisy);
     }
-    let (c_all, _, c_pp, _) = summarise("train clean", &clean);
-    let (n_all, _, n_pp, _) = summarise("train noisy", &noisy);
-    assert!(c_all >= clean_min, "clean coverage {c_all:.4} < {clean_min}");
-    assert!(n_all >= noisy_min, "noisy coverage {n_all:.4} < {noisy_min}");
-    assert!(c_pp <= MAX_PER_POINT && n_pp <= MAX_PER_POINT, "{c_pp:.2} / {n_pp:.2} candidates per point");
+    check("train", &clean, &noisy, clean_min, noisy_min);
 }
 
 #[test]
@@ -103,26 +121,10 @@ fn coverage_on_synthetic_shapes_clean_and_noisy() {
         for seed in 0..2u64 {
             let mut rng = point2quad::rng::Rng::new(1000 + seed);
             let mesh = random_shape_of(family, &mut rng);
-            let name = format!("{}#{seed}", family.name());
-            let (c, _) = coverage(&mesh.vertices, &mesh.quads, &cfg);
-            let (n, _) = coverage(&noisy_cloud(&mesh, 1), &mesh.quads, &cfg);
-            println!(
-                "{name:24} {:7} {:9.4} {:7.2} | {:9.4} {:7.2}",
-                c.faces,
-                c.ratio(),
-                c.per_point(),
-                n.ratio(),
-                n.per_point()
-            );
-            clean.push((name.clone(), c));
-            noisy.push((name, n));
+            measure(format!("{}#{seed}", family.name()), &mesh, &cfg, &mut clean, &mut noisy);
         }
     }
-    let (c_all, _, c_pp, _) = summarise("synthetic clean", &clean);
-    let (n_all, _, n_pp, _) = summarise("synthetic noisy", &noisy);
-    assert!(c_all >= SYN_CLEAN_MIN, "clean coverage {c_all:.4} < {SYN_CLEAN_MIN}");
-    assert!(n_all >= SYN_NOISY_MIN, "noisy coverage {n_all:.4} < {SYN_NOISY_MIN}");
-    assert!(c_pp <= MAX_PER_POINT && n_pp <= MAX_PER_POINT, "{c_pp:.2} / {n_pp:.2} candidates per point");
+    check("synthetic", &clean, &noisy, SYN_CLEAN_MIN, SYN_NOISY_MIN);
 }
 
 // Regression guards: the aggregates measured with `CandidateConfig::default()`

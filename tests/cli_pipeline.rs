@@ -5,42 +5,18 @@
 
 #[path = "common/quality.rs"]
 mod quality_common;
+#[path = "common/scratch.rs"]
+mod scratch;
 
 use point2quad::mesh::halfedge::HalfedgeMesh;
 use point2quad::mesh::poly::PolyMesh;
 use point2quad::mesh::shapes;
 use point2quad::mesh::validate::validate;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use quality_common::{parse_json, Json};
-
-/// A unique scratch folder, removed on drop.
-struct Scratch(PathBuf);
-
-impl Scratch {
-    fn new(tag: &str) -> Scratch {
-        static N: AtomicU64 = AtomicU64::new(0);
-        let d = std::env::temp_dir().join(format!(
-            "p2q_cli_pipeline_{tag}_{}_{}",
-            std::process::id(),
-            N.fetch_add(1, Ordering::Relaxed)
-        ));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).expect("test: scratch dir");
-        Scratch(d)
-    }
-    fn p(&self, name: &str) -> String {
-        self.0.join(name).display().to_string()
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
+use scratch::Scratch;
 
 /// Runs the binary; asserts no panic text whatever the outcome.
 fn run(args: &[&str]) -> Output {
@@ -117,7 +93,7 @@ fn synth_dataset_train_reconstruct_eval_end_to_end() {
     ok(&["synth", "--from", &s.p("meshes/a_sphere.obj"), "-o", &cloud, "--gt", &gt, "--seed", "5"]);
     let (mesh, svg) = (s.p("out.obj"), s.p("out.svg"));
     // One epoch on three tiny meshes predicts (almost) nothing real at 0.5, and an
-    // empty prediction is refused by `eval`; threshold 0 hands every candidate to the
+    // empty prediction would only score 0; threshold 0 hands every candidate to the
     // post-process, which must still produce a valid mesh.
     let out = ok(&["reconstruct", &cloud, "-o", &mesh, "--model", &model, "--svg", &svg, "--threshold", "0"]);
     let err = String::from_utf8_lossy(&out.stderr);

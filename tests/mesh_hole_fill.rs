@@ -145,6 +145,19 @@ fn hole_filling_on_train_meshes() {
     measure("train");
 }
 
+/// Adds one run to a row of totals (watertightness of the original, with holes, after
+/// filling; restored / added; restored / removed; count) and to the single-face holes.
+fn tally(t: &mut [f64; 6], singles: &mut (usize, usize), wt_orig: f64, r: &Row) {
+    t[0] += wt_orig;
+    t[1] += r.wt_before;
+    t[2] += r.wt_after;
+    t[3] += r.restored as f64 / r.added.max(1) as f64;
+    t[4] += r.restored as f64 / r.removed.max(1) as f64;
+    t[5] += 1.0;
+    singles.0 += r.singles_closed;
+    singles.1 += r.singles;
+}
+
 fn measure(sub: &str) {
     let Some(paths) = shared_meshes(sub) else { return };
     println!(
@@ -177,15 +190,7 @@ fn measure(sub: &str) {
         for (ri, rate) in [0.01, 0.02, 0.05].into_iter().enumerate() {
             let r = run_one(&full, &vertices, rate, 1000 + ri as u64, true);
             let r2 = run_one(&full, &vertices, rate, 1000 + ri as u64, false);
-            let t = &mut totals_no_points[ri];
-            t[0] += wt_orig;
-            t[1] += r2.wt_before;
-            t[2] += r2.wt_after;
-            t[3] += r2.restored as f64 / r2.added.max(1) as f64;
-            t[4] += r2.restored as f64 / r2.removed.max(1) as f64;
-            t[5] += 1.0;
-            all_singles.0 += r2.singles_closed;
-            all_singles.1 += r2.singles;
+            tally(&mut totals_no_points[ri], &mut all_singles, wt_orig, &r2);
             println!(
                 "{:<22} {:>6} {:>4.0}% {:>7} {:>8.4} {:>8.4} {:>8.4} {:>6} {:>9.3} {:>9.3} {:>4}/{:<4}",
                 name,
@@ -201,15 +206,7 @@ fn measure(sub: &str) {
                 r.singles_closed,
                 r.singles
             );
-            let t = &mut totals[ri];
-            t[0] += wt_orig;
-            t[1] += r.wt_before;
-            t[2] += r.wt_after;
-            t[3] += r.restored as f64 / r.added.max(1) as f64;
-            t[4] += r.restored as f64 / r.removed.max(1) as f64;
-            t[5] += 1.0;
-            all_singles.0 += r.singles_closed;
-            all_singles.1 += r.singles;
+            tally(&mut totals[ri], &mut all_singles, wt_orig, &r);
         }
     }
     for (label, totals) in [("interior points kept", totals), ("interior points removed", totals_no_points)] {

@@ -156,7 +156,7 @@ proptest! {
             prop_assert_eq!(h.n_faces(), qm.quads.len());
             prop_assert_eq!(rep.faces_out, qm.quads.len());
             prop_assert_eq!(rep.faces_in, faces.len());
-            prop_assert!(rep.inserted + rep.refused_on_insertion + rep.removed_by_score + rep.degenerate == faces.len());
+            prop_assert!(rep.inserted + rep.refused_on_insertion + rep.removed_by_score + rep.degenerate + rep.zero_area == faces.len());
         }
     }
 

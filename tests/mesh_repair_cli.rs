@@ -70,3 +70,36 @@ fn repair_usage_errors() {
     assert_eq!(r.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&r.stderr).contains("/nonexistent/x.obj"));
 }
+
+/// Regression: `repair` kept zero-area quads (every topological check passes them). A
+/// valid grid plus a quad with all four corners at one point, a collinear quad and a
+/// triangle-shaped quad (two corners at one position), all on their own vertices: the
+/// three are dropped and counted in the summary line, the grid is kept whole, and the
+/// output has no degenerate quad by the metrics' own count.
+#[test]
+fn repair_drops_zero_area_quads_and_counts_them() {
+    use point2quad::mesh::quality::{is_degenerate_quad, mesh_metrics};
+    let g = point2quad::mesh::shapes::grid(4, 3, 4.0, 3.0);
+    let mut poly = PolyMesh::from(&g);
+    let n = poly.vertices.len() as u32;
+    poly.vertices.extend([[9.0, 9.0, 9.0]; 4]);
+    poly.vertices.extend((0..4).map(|i| [10.0 + i as f64, 0.5 * i as f64, 1.0]));
+    poly.vertices.extend([[0.0, 5.0, 0.0], [1.0, 5.0, 0.0], [1.0, 5.0, 0.0], [0.0, 6.0, 0.0]]);
+    for k in 0..3 {
+        poly.faces.push((0..4).map(|i| n + 4 * k + i).collect());
+    }
+    let input = tmp("zero_area.obj");
+    write_mesh(&input, &poly).unwrap();
+    let out = tmp("zero_area_out.obj");
+    let r = bin().args(["repair", input.to_str().unwrap(), "-o", out.to_str().unwrap()]).output().unwrap();
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{err}");
+    assert!(err.contains("zero-area dropped 3"), "{err}");
+    let res = read_mesh(&out).unwrap();
+    assert_eq!(res.vertices, poly.vertices);
+    assert_eq!(res.faces.len(), g.quads.len(), "{err}");
+    assert_eq!(mesh_metrics(&res).degenerate_quads, 0);
+    let q = res.to_quads().unwrap();
+    assert!(q.quads.iter().all(|f| !is_degenerate_quad(&f.map(|v| q.vertices[v as usize]))));
+    validate(&HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).unwrap()).unwrap();
+}

@@ -7,6 +7,7 @@ mod quality_common;
 
 use std::process::{Command, Output};
 
+use point2quad::mesh::poly::PolyMesh;
 use point2quad::mesh::quality::{compare, mesh_metrics};
 use quality_common::{check_xml, grid, parse_json, temp_dir, torus, write_obj, Json};
 
@@ -87,7 +88,7 @@ fn eval_with_gt_reports_accuracy() {
     assert_eq!(num(&j, "precision"), 1.0);
     assert_eq!(num(&j, "recall"), 0.75);
     let lib = compare(&pred, &gt, 4).unwrap();
-    assert_eq!(num(&j, "chamfer"), lib.chamfer);
+    assert_eq!(Some(num(&j, "chamfer")), lib.chamfer);
     assert!(num(&j, "chamfer") > 0.0);
     // The table says the same in words.
     let out = p2q(&["eval", pp.to_str().unwrap(), "--gt", gp.to_str().unwrap(), "--seed", "4"]);
@@ -107,6 +108,98 @@ fn eval_of_a_mesh_without_faces_is_all_finite() {
     for k in KEYS.iter().filter(|k| **k != "quad_only") {
         assert_eq!(num(&j, k), 0.0, "{k}");
     }
+}
+
+/// An empty prediction is a result, not an error: scored 0 (precision 0 of 0 faces,
+/// recall 0), Chamfer `null` with `empty_prediction: true` and a note; the same
+/// numbers whether the file holds the ground truth's vertices or nothing at all.
+/// Malformed files stay errors naming the file and line.
+#[test]
+fn eval_scores_an_empty_prediction_and_refuses_malformed_files() {
+    let dir = temp_dir("eval_empty_pred");
+    let gt = grid(3, 2);
+    let gp = dir.join("gt.obj");
+    write_obj(&gp, &gt);
+    let g = gp.to_str().unwrap();
+    let points_only = dir.join("points.obj");
+    write_obj(&points_only, &PolyMesh { vertices: gt.vertices.clone(), faces: vec![] });
+    let mut ply0 = b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n".to_vec();
+    ply0.extend_from_slice(
+        b"property float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n",
+    );
+    let empties: Vec<(std::path::PathBuf, f64)> = vec![
+        (points_only, gt.vertices.len() as f64),
+        (dir.join("zero_bytes.obj"), 0.0),
+        (dir.join("comments.obj"), 0.0),
+        (dir.join("empty.off"), 0.0),
+        (dir.join("empty.ply"), 0.0),
+    ];
+    std::fs::write(&empties[1].0, b"").unwrap();
+    std::fs::write(&empties[2].0, b"# no output\no nothing\n").unwrap();
+    std::fs::write(&empties[3].0, b"OFF\n0 0 0\n").unwrap();
+    std::fs::write(&empties[4].0, &ply0).unwrap();
+    for (path, vertices) in &empties {
+        let p = path.to_str().unwrap();
+        let out = p2q(&["eval", p, "--gt", g, "--json"]);
+        let j = json_of(&out);
+        for (k, v) in [
+            ("faces", 0.0),
+            ("precision", 0.0),
+            ("recall", 0.0),
+            ("watertightness", 0.0),
+            ("manifoldness", 0.0),
+            ("nonmanifold_vertices", 0.0),
+            ("vertices", *vertices),
+            ("unreferenced_vertices", *vertices),
+            ("matched_vertices", *vertices),
+        ] {
+            assert_eq!(num(&j, k), v, "{p}: {k}");
+        }
+        for k in ["chamfer", "chamfer_pred_to_gt", "chamfer_gt_to_pred"] {
+            assert_eq!(j.get(k), Some(&Json::Null), "{p}: {k}");
+        }
+        assert_eq!(j.get("empty_prediction"), Some(&Json::Bool(true)), "{p}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("note") && err.contains(p) && err.contains("empty prediction"), "{err}");
+        // Without --gt: the mesh metrics alone, no note.
+        let out = p2q(&["eval", p, "--json"]);
+        assert_eq!(num(&json_of(&out), "faces"), 0.0);
+        assert!(out.stderr.is_empty(), "{}", String::from_utf8_lossy(&out.stderr));
+        // The table says it in words.
+        let out = p2q(&["eval", p, "--gt", g]);
+        assert!(out.status.success());
+        let table = String::from_utf8(out.stdout).unwrap();
+        assert!(table.contains("undefined (empty prediction"), "{table}");
+    }
+    // A non-empty prediction is not flagged.
+    let j = json_of(&p2q(&["eval", g, "--gt", g, "--json"]));
+    assert_eq!(j.get("empty_prediction"), Some(&Json::Bool(false)));
+    assert!(num(&j, "chamfer") > 0.0);
+    // Malformed stays an error (exit 1, file and line named), as does an empty ground truth.
+    for (name, bytes, line) in [
+        ("binary.obj", &b"\x89PNG\r\n\x1a\n\0\0"[..], ":1:"),
+        ("words.obj", b"# fine\nnot obj\n", ":2:"),
+        ("headless.off", b"", "empty file"),
+        ("lying.off", b"OFF\n2 0 0\n0 0 0\n", "truncated"),
+        ("unterminated.ply", b"ply\nformat ascii 1.0\n", "header not terminated"),
+    ] {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        let out = p2q(&["eval", path.to_str().unwrap(), "--gt", g]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{name}: {err}");
+        assert!(err.contains(path.to_str().unwrap()) && err.contains(line), "{name}: {err}");
+        assert!(out.stdout.is_empty(), "{name}");
+    }
+    let zero = empties[1].0.to_str().unwrap();
+    let svg = dir.join("zero.svg");
+    for args in [vec!["eval", g, "--gt", zero], vec!["render", zero, "-o", svg.to_str().unwrap()]] {
+        let out = p2q(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(err.contains(zero) && err.contains("no"), "{args:?}: {err}");
+    }
+    assert!(!svg.exists());
 }
 
 #[test]

@@ -4,7 +4,7 @@
 
 use super::atomic::write_atomic;
 pub use super::ply::PlyEncoding;
-use super::{obj, off, ply};
+use super::{obj, off, ply, text};
 use crate::error::{Error, Result};
 use crate::mesh::poly::PolyMesh;
 use std::path::Path;
@@ -67,15 +67,65 @@ pub fn read_mesh(path: &Path) -> Result<PolyMesh> {
 /// [`obj::parse_obj`], [`off::parse_off`], [`ply::parse_ply`]; also when the
 /// file holds no vertices.
 pub fn parse_mesh(bytes: &[u8], format: MeshFormat, name: &str) -> Result<PolyMesh> {
+    let mesh = parse_mesh_allow_empty(bytes, format, name)?;
+    if mesh.vertices.is_empty() {
+        return Err(Error::parse(name, 0, "contains no vertices"));
+    }
+    Ok(mesh)
+}
+
+/// Reads a mesh like [`read_mesh`], except that a well-formed file holding no
+/// vertices (an empty OBJ, `OFF 0 0 0`, a PLY with zero vertices) is an empty mesh
+/// rather than an error. For callers that score an output, where "nothing" is a
+/// result (`point2quad eval`); everything that needs geometry uses [`read_mesh`].
+///
+/// # Errors
+/// As [`read_mesh`], less the "no vertices" error.
+pub fn read_mesh_allow_empty(path: &Path) -> Result<PolyMesh> {
+    let format = MeshFormat::from_path(path)?;
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_mesh_allow_empty(&bytes, format, &path.display().to_string())
+}
+
+/// [`parse_mesh`] without the "no vertices" check (see [`read_mesh_allow_empty`]).
+///
+/// # Errors
+/// As [`parse_mesh`], less the "no vertices" error.
+pub fn parse_mesh_allow_empty(bytes: &[u8], format: MeshFormat, name: &str) -> Result<PolyMesh> {
     let mesh = match format {
         MeshFormat::Obj => obj::parse_obj(bytes, name)?,
         MeshFormat::Off => off::parse_off(bytes, name)?,
         MeshFormat::Ply => ply::parse_ply(bytes, name)?,
     };
-    if mesh.vertices.is_empty() {
-        return Err(Error::parse(name, 0, "contains no vertices"));
+    // OFF and PLY state their counts in a header, so a parsed empty file is a
+    // well-formed empty mesh. OBJ skips statements it does not know, so any bytes
+    // parse as a vertex-less OBJ: an empty mesh is accepted only from a file that
+    // holds nothing but blank lines, comments and geometry-free OBJ statements — a
+    // binary or mistyped file stays an error rather than scoring as "no output".
+    if format == MeshFormat::Obj && mesh.vertices.is_empty() {
+        if let Some(ln) = first_non_obj_line(bytes) {
+            return Err(Error::parse(
+                name,
+                ln,
+                "contains no vertices, and this line is not an OBJ statement",
+            ));
+        }
     }
     Ok(mesh)
+}
+
+/// OBJ statements that may appear in a file with no vertices (grouping, materials,
+/// normals and texture coordinates: nothing that makes a face).
+const GEOMETRY_FREE_OBJ: [&[u8]; 7] = [b"o", b"g", b"s", b"mtllib", b"usemtl", b"vn", b"vt"];
+
+/// The 1-based number of the first line of `bytes` that is neither blank, nor a
+/// comment, nor a geometry-free OBJ statement; `None` when there is none.
+fn first_non_obj_line(bytes: &[u8]) -> Option<usize> {
+    let bytes = &*text::cr_lines(bytes);
+    text::Lines::new(bytes).find_map(|(ln, raw)| {
+        let key = text::Tokens::commented(raw).next()?;
+        (!GEOMETRY_FREE_OBJ.contains(&key)).then_some(ln)
+    })
 }
 
 /// Writes a mesh atomically, choosing the format by extension (PLY: binary
@@ -136,11 +186,54 @@ mod tests {
         assert!(MeshFormat::from_path(Path::new("noext")).is_err());
     }
 
+    /// Every writer's output parses back to the same faces and bit-identical
+    /// coordinates (negative zero, 1e300, subnormals, a face repeating a vertex). The
+    /// random version is tests/io_props.rs; this is the one fixed case per format.
+    #[test]
+    fn every_format_and_encoding_round_trips_bit_exactly() {
+        let m = PolyMesh {
+            vertices: vec![[-0.0, 1e300, 5e-324], [0.1, -2.5, 3.0], [1.0, 1.0, 1.0], [7.0, -8.0, 1e-310]],
+            faces: vec![vec![0, 1, 2, 3], vec![2, 1, 0], vec![3, 3, 1]],
+        };
+        let bits = |m: &PolyMesh| m.vertices.iter().flatten().map(|c| c.to_bits()).collect::<Vec<_>>();
+        for (format, enc) in [
+            (MeshFormat::Obj, PlyEncoding::Ascii),
+            (MeshFormat::Off, PlyEncoding::Ascii),
+            (MeshFormat::Ply, PlyEncoding::Ascii),
+            (MeshFormat::Ply, PlyEncoding::BinaryLittleEndian),
+            (MeshFormat::Ply, PlyEncoding::BinaryBigEndian),
+        ] {
+            let mut buf = Vec::new();
+            match format {
+                MeshFormat::Obj => obj::write_obj(&mut buf, &m),
+                MeshFormat::Off => off::write_off(&mut buf, &m),
+                MeshFormat::Ply => ply::write_ply(&mut buf, &m, enc),
+            }
+            .unwrap();
+            let back = parse_mesh(&buf, format, "mem").unwrap();
+            assert_eq!(back.faces, m.faces, "{format:?} {enc:?}");
+            assert_eq!(bits(&back), bits(&m), "{format:?} {enc:?}");
+        }
+    }
+
     #[test]
     fn empty_files_are_errors_naming_the_file() {
         for (src, f) in [(&b""[..], MeshFormat::Obj), (b"OFF\n0 0 0\n", MeshFormat::Off)] {
             let e = parse_mesh(src, f, "e.x").unwrap_err().to_string();
             assert!(e.contains("e.x") && e.contains("no vertices"), "{e}");
+            // The same files are empty meshes where emptiness is allowed.
+            assert_eq!(parse_mesh_allow_empty(src, f, "e.x").unwrap(), PolyMesh::default());
+        }
+        let blank = b"# nothing here\n\n  \r\no empty\ng part\nvn 0 0 1\n";
+        assert_eq!(parse_mesh_allow_empty(blank, MeshFormat::Obj, "e.obj").unwrap(), PolyMesh::default());
+        // Malformed stays malformed: an OFF file without its header, and OBJ-less
+        // bytes (which the lenient OBJ reader would skip), naming the line.
+        assert!(parse_mesh_allow_empty(b"", MeshFormat::Off, "e.off").is_err());
+        for (src, line) in
+            [(&b"\0\0\0\0"[..], ":1:"), (b"# ok\nhello world\n", ":2:"), (b"\n\n\x89PNG\r\n", ":3:")]
+        {
+            let e = parse_mesh_allow_empty(src, MeshFormat::Obj, "g.obj").unwrap_err().to_string();
+            assert!(e.contains(&format!("g.obj{line}")) && e.contains("not an OBJ statement"), "{e}");
         }
     }
 

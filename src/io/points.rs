@@ -149,12 +149,7 @@ pub fn write_points_xyz(path: &Path, points: &[[f64; 3]]) -> Result<()> {
 pub fn write_xyz(w: &mut dyn Write, points: &[[f64; 3]]) -> Result<()> {
     let run = |w: &mut dyn Write| -> std::io::Result<()> {
         for p in points {
-            text::write_f64(w, p[0])?;
-            w.write_all(b" ")?;
-            text::write_f64(w, p[1])?;
-            w.write_all(b" ")?;
-            text::write_f64(w, p[2])?;
-            w.write_all(b"\n")?;
+            text::write_xyz_line(w, *p)?;
         }
         Ok(())
     };

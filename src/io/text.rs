@@ -214,6 +214,26 @@ pub(crate) fn write_f64(w: &mut dyn Write, x: f64) -> std::io::Result<()> {
     }
 }
 
+/// Writes one `x y z` line (round-trip exact, see [`write_f64`]): the vertex line of
+/// .xyz, OFF and ASCII PLY, and of OBJ after its `v `.
+pub(crate) fn write_xyz_line(w: &mut dyn Write, p: [f64; 3]) -> std::io::Result<()> {
+    write_f64(w, p[0])?;
+    w.write_all(b" ")?;
+    write_f64(w, p[1])?;
+    w.write_all(b" ")?;
+    write_f64(w, p[2])?;
+    w.write_all(b"\n")
+}
+
+/// Writes one `n i0 … i(n-1)` face line with 0-based indices (OFF, ASCII PLY).
+pub(crate) fn write_counted_face(w: &mut dyn Write, face: &[u32]) -> std::io::Result<()> {
+    write!(w, "{}", face.len())?;
+    for &i in face {
+        write!(w, " {i}")?;
+    }
+    w.write_all(b"\n")
+}
+
 /// Maps an I/O error from an in-memory writer (no path known here; `write_atomic`
 /// replaces it with one naming the file).
 pub(crate) fn out_err(e: std::io::Error) -> Error {

@@ -279,24 +279,36 @@ impl HalfedgeMesh {
                 continue;
             }
             seen[f.idx()] = true;
-            let mut comp = vec![f];
-            let mut k = 0;
-            while k < comp.len() {
-                let g = comp[k];
-                k += 1;
-                for h in self.face_halfedges(g) {
-                    if let Some(n) = self.face(h.opposite()) {
-                        if !seen[n.idx()] {
-                            seen[n.idx()] = true;
-                            comp.push(n);
-                        }
-                    }
-                }
-            }
+            let mut comp = self.flood(f, |n| !std::mem::replace(&mut seen[n.idx()], true));
             comp.sort_unstable();
             comps.push(comp);
         }
         comps
+    }
+
+    /// The live faces across the four edges of face `f` (none across a boundary edge).
+    fn face_neighbours(&self, f: FaceId) -> impl Iterator<Item = FaceId> + '_ {
+        self.face_halfedges(f).into_iter().filter_map(move |h| self.face(h.opposite()))
+    }
+
+    /// The edge-connected component of `seed`, breadth first from it. `first_visit(g)`
+    /// marks face `g` and says whether it was unmarked; `seed` must be marked already.
+    /// The caller picks the marker: a dense flag per face when sweeping every component,
+    /// a hash set for one component of a possibly much larger mesh (a dense array would
+    /// cost O(#faces) per call, and insertion flips small patches often).
+    fn flood(&self, seed: FaceId, mut first_visit: impl FnMut(FaceId) -> bool) -> Vec<FaceId> {
+        let mut comp = vec![seed];
+        let mut k = 0;
+        while k < comp.len() {
+            let g = comp[k];
+            k += 1;
+            for n in self.face_neighbours(g) {
+                if first_visit(n) {
+                    comp.push(n);
+                }
+            }
+        }
+        comp
     }
 
     /// V − E + F over the vertices that have faces (isolated vertices are not counted,
@@ -524,16 +536,29 @@ impl HalfedgeMesh {
         let mut owner: HashMap<u32, u8> = HashMap::new();
         let mut lists: [Vec<FaceId>; 2] = [Vec::new(), Vec::new()];
         let mut queues: [VecDeque<FaceId>; 2] = [VecDeque::new(), VecDeque::new()];
+        /// Gives face `g` to side `s` (queued for its flood) unless it has it already;
+        /// `false` when the other side has it: the floods met.
+        fn claim(
+            owner: &mut HashMap<u32, u8>,
+            list: &mut Vec<FaceId>,
+            queue: &mut VecDeque<FaceId>,
+            s: usize,
+            g: FaceId,
+        ) -> bool {
+            match owner.get(&g.0) {
+                Some(&o) => o as usize == s,
+                None => {
+                    owner.insert(g.0, s as u8);
+                    list.push(g);
+                    queue.push_back(g);
+                    true
+                }
+            }
+        }
         for (s, seeds) in [a, b].into_iter().enumerate() {
             for &f in seeds {
-                match owner.get(&f.0) {
-                    Some(&o) if o as usize != s => return None,
-                    Some(_) => {}
-                    None => {
-                        owner.insert(f.0, s as u8);
-                        lists[s].push(f);
-                        queues[s].push_back(f);
-                    }
+                if !claim(&mut owner, &mut lists[s], &mut queues[s], s, f) {
+                    return None;
                 }
             }
         }
@@ -542,17 +567,9 @@ impl HalfedgeMesh {
                 let Some(f) = queues[s].pop_front() else {
                     return Some((s == 0, std::mem::take(&mut lists[s])));
                 };
-                for h in self.face_halfedges(f) {
-                    if let Some(g) = self.face(h.opposite()) {
-                        match owner.get(&g.0) {
-                            Some(&o) if o as usize != s => return None,
-                            Some(_) => {}
-                            None => {
-                                owner.insert(g.0, s as u8);
-                                lists[s].push(g);
-                                queues[s].push_back(g);
-                            }
-                        }
+                for g in self.face_neighbours(f) {
+                    if !claim(&mut owner, &mut lists[s], &mut queues[s], s, g) {
+                        return None;
                     }
                 }
             }
@@ -600,19 +617,7 @@ impl HalfedgeMesh {
             return Err(Error::Topology(format!("flip_component: {f} is not a live face")));
         }
         let mut seen: HashSet<u32> = HashSet::from([f.0]);
-        let mut comp = vec![f];
-        let mut k = 0;
-        while k < comp.len() {
-            let g = comp[k];
-            k += 1;
-            for h in self.face_halfedges(g) {
-                if let Some(n) = self.face(h.opposite()) {
-                    if seen.insert(n.0) {
-                        comp.push(n);
-                    }
-                }
-            }
-        }
+        let comp = self.flood(f, |n| seen.insert(n.0));
         self.flip_patch(&comp);
         Ok(())
     }

@@ -16,6 +16,7 @@ use std::collections::HashMap;
 
 use super::halfedge::HalfedgeMesh;
 use super::handles::{HalfedgeId, VertexId};
+use super::quality::is_degenerate_quad;
 use crate::error::{Error, Result};
 use crate::math::{add, cross, dist_sq, dot, norm, normalize, scale, sub};
 
@@ -191,6 +192,11 @@ impl Filler<'_> {
         } else {
             (self.cfg.min_scaled_jacobian, self.cfg.min_normal_dot)
         };
+        // Never a quad without area, even where pattern 1 accepts any shape: closing a
+        // hole left by a dropped zero-area quad must not put it back.
+        if is_degenerate_quad(p) {
+            return None;
+        }
         let sj = scaled_jacobian(p);
         if sj < min_sj {
             return None;
@@ -446,20 +452,8 @@ mod tests {
 
     /// n×n quads on the unit grid, vertex (i, j) = (n + 1) j + i.
     fn grid(n: u32) -> (Vec<[f64; 3]>, Vec<[u32; 4]>) {
-        let mut p = Vec::new();
-        for j in 0..=n {
-            for i in 0..=n {
-                p.push([i as f64, j as f64, 0.0]);
-            }
-        }
-        let mut q = Vec::new();
-        for j in 0..n {
-            for i in 0..n {
-                let a = j * (n + 1) + i;
-                q.push([a, a + 1, a + n + 2, a + n + 1]);
-            }
-        }
-        (p, q)
+        let m = crate::mesh::shapes::grid(n as usize, n as usize, n as f64, n as f64);
+        (m.vertices, m.quads)
     }
 
     fn keys(m: &HalfedgeMesh) -> Vec<[u32; 4]> {

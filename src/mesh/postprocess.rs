@@ -9,6 +9,7 @@ use std::collections::BinaryHeap;
 use super::halfedge::{HalfedgeMesh, InsertOutcome};
 use super::hole_fill::{fill_holes, HoleFillConfig, HoleFillReport};
 use super::poly::QuadMesh;
+use super::quality::is_degenerate_quad;
 use super::soup::FaceSoup;
 use crate::error::{Error, Result};
 use crate::math::{cross, dot};
@@ -49,6 +50,11 @@ pub struct PostprocessReport {
     pub faces_in: usize,
     /// Faces dropped before anything else because they repeat a vertex.
     pub degenerate: usize,
+    /// Faces dropped before anything else because their corners, though distinct
+    /// vertices, have no area: two at one position (all four included) or all on one
+    /// line ([`is_degenerate_quad`]). Kept, they would pass every topological check and
+    /// leave a zero-area quad in the output.
+    pub zero_area: usize,
     /// Faces deleted by the score filter (a).
     pub removed_by_score: usize,
     /// Faces inserted into the half-edge mesh (b).
@@ -245,7 +251,8 @@ pub fn orient_components(
     flipped
 }
 
-/// The whole post-process: (a) score filter, (b) manifold insertion by probability,
+/// The whole post-process, after dropping faces that repeat a vertex or have no area
+/// ([`PostprocessReport::degenerate`], [`PostprocessReport::zero_area`]): (a) score filter, (b) manifold insertion by probability,
 /// (c) hole filling, then [`orient_components`]. The output's vertices are `positions` (bit-identical, in order)
 /// followed by any vertex the hole filling added; vertices no face uses stay in place.
 ///
@@ -265,6 +272,12 @@ pub fn postprocess(
     let mut report = PostprocessReport { faces_in: faces.len(), ..Default::default() };
     let mut keep: Vec<bool> = faces.iter().map(|f| !is_degenerate(f)).collect();
     report.degenerate = keep.iter().filter(|k| !**k).count();
+    for (k, f) in keep.iter_mut().zip(faces) {
+        if *k && is_degenerate_quad(&f.map(|v| positions[v as usize])) {
+            *k = false;
+            report.zero_area += 1;
+        }
+    }
     if cfg.score_filter {
         report.removed_by_score = score_filter(faces, probs, &mut keep, cfg.score_limit);
     }
@@ -345,6 +358,58 @@ mod tests {
         assert_eq!((qm.quads.len(), rep.degenerate), (0, 1));
         let (qm, _) = postprocess(&[], &[], &[], &cfg).unwrap();
         assert!(qm.quads.is_empty());
+    }
+
+    #[test]
+    fn zero_area_quads_are_dropped_and_counted() {
+        // A 2 × 1 strip plus, on extra vertices, a quad collapsed to one point, a
+        // collinear quad and a triangle-shaped quad (two corners at one position).
+        let mut pos: Vec<[f64; 3]> = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [2.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [2.0, 1.0, 0.0],
+        ];
+        pos.extend([[5.0, 5.0, 5.0]; 4]); // 6..10
+        pos.extend((0..4).map(|i| [7.0 + i as f64, 3.0, 0.0])); // 10..14
+        pos.extend([[0.0, 3.0, 0.0], [1.0, 3.0, 0.0], [1.0, 3.0, 0.0], [0.0, 4.0, 0.0]]); // 14..18
+        let faces =
+            [[0, 1, 4, 3], [1, 2, 5, 4], [6, 7, 8, 9], [10, 11, 12, 13], [14, 15, 16, 17], [0, 0, 1, 3]];
+        for fill_holes in [false, true] {
+            let cfg = PostprocessConfig { fill_holes, ..Default::default() };
+            let (qm, rep) = postprocess(&pos, &faces, &[0.5; 6], &cfg).unwrap();
+            assert_eq!((rep.degenerate, rep.zero_area, rep.inserted), (1, 3, 2), "{rep:?}");
+            assert_eq!(qm.quads.len(), 2);
+            assert!(qm.quads.iter().all(|q| !is_degenerate_quad(&q.map(|v| qm.vertices[v as usize]))));
+            assert_eq!(qm.vertices, pos);
+        }
+    }
+
+    #[test]
+    fn hole_filling_does_not_put_a_zero_area_quad_back() {
+        // A 3 × 3 grid whose centre quad has its corners on one slanted line (exactly
+        // collinear on paper; rounding leaves its diagonals' cross product ~1e-17, so
+        // pattern 1's own shape test sees a normal). Dropping it leaves a 4-edge hole
+        // whose only closing quad is the same zero-area one: the hole must stay open.
+        let mut pos: Vec<[f64; 3]> = (0..16).map(|i| [(i % 4) as f64, (i / 4) as f64, 0.0]).collect();
+        let on_line = |t: f64| [1.5 + 0.1 * t, 1.5 + 0.3 * t, 0.0];
+        for (v, t) in [(5, -1.0), (6, 0.7), (10, 2.0), (9, 0.3)] {
+            pos[v] = on_line(t);
+        }
+        let id = |i: u32, j: u32| j * 4 + i;
+        let faces: Vec<[u32; 4]> = (0..3)
+            .flat_map(|j| (0..3).map(move |i| [id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]))
+            .collect();
+        let centre = faces[4].map(|v| pos[v as usize]);
+        assert!(is_degenerate_quad(&centre));
+        let (d1, d2) = (crate::math::sub(centre[2], centre[0]), crate::math::sub(centre[3], centre[1]));
+        assert_ne!(cross(d1, d2), [0.0; 3], "the case must exercise rounding");
+        let probs = vec![0.5; faces.len()];
+        let (qm, rep) = postprocess(&pos, &faces, &probs, &PostprocessConfig::default()).unwrap();
+        assert_eq!((rep.zero_area, rep.inserted, qm.quads.len()), (1, 8, 8), "{rep:?}");
+        assert!(qm.quads.iter().all(|q| !is_degenerate_quad(&q.map(|v| qm.vertices[v as usize]))));
     }
 
     #[test]

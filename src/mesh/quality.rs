@@ -75,20 +75,31 @@ pub struct MeshMetrics {
 }
 
 /// Accuracy against a ground-truth mesh (DESIGN §7). All values are finite.
+///
+/// An empty prediction (no faces, or no face with a finite vertex: nothing to sample)
+/// is a result, not an error: precision 0 (0 of 0 predicted faces is undefined, and
+/// scored 0 so that no output never looks accurate), recall 0, and the three Chamfer
+/// figures `None` (the distance from the ground truth to an empty set is unbounded;
+/// no finite number would be honest). [`GtMetrics::empty_prediction`] says so.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GtMetrics {
     /// Chamfer distance as in the paper (Eq. 14): the SUM of the two one-sided mean
     /// nearest distances, `chamfer_pred_to_gt + chamfer_gt_to_pred`, in units of the
-    /// ground truth's bounding-box diagonal.
-    pub chamfer: f64,
-    /// Mean distance from each predicted sample to its nearest ground-truth sample.
-    pub chamfer_pred_to_gt: f64,
-    /// Mean distance from each ground-truth sample to its nearest predicted sample.
-    pub chamfer_gt_to_pred: f64,
+    /// ground truth's bounding-box diagonal. `None` for an empty prediction.
+    pub chamfer: Option<f64>,
+    /// Mean distance from each predicted sample to its nearest ground-truth sample
+    /// (`None` for an empty prediction).
+    pub chamfer_pred_to_gt: Option<f64>,
+    /// Mean distance from each ground-truth sample to its nearest predicted sample
+    /// (`None` for an empty prediction).
+    pub chamfer_gt_to_pred: Option<f64>,
     /// Matched predicted faces / predicted faces (0 when the prediction has no face).
     pub precision: f64,
     /// Distinct ground-truth faces matched / ground-truth faces.
     pub recall: f64,
+    /// True when the prediction had no surface to sample (no face, or no face with a
+    /// finite vertex): precision and recall are 0 and Chamfer is undefined.
+    pub empty_prediction: bool,
     /// Predicted vertices matched to a ground-truth vertex within the tolerance.
     pub matched_vertices: usize,
 }
@@ -224,6 +235,48 @@ pub struct QuadShape {
     pub angles_deg: Option<[f64; 4]>,
 }
 
+/// The quad moved to p0 and scaled so its largest coordinate offset is 1; `None` for a
+/// non-finite corner or all four corners at one point. Every shape measure is invariant
+/// under translation and uniform scale, and in this frame a huge (1e200) or tiny
+/// (1e-200) but finite quad does not overflow or underflow in squared lengths (and get
+/// called degenerate). Halving first keeps the differences themselves finite.
+fn unit_quad(p: &[[f64; 3]; 4]) -> Option<[[f64; 3]; 4]> {
+    if p.iter().flatten().any(|c| !c.is_finite()) {
+        return None;
+    }
+    let half: [[f64; 3]; 4] = std::array::from_fn(|i| std::array::from_fn(|k| 0.5 * p[i][k] - 0.5 * p[0][k]));
+    let size = half.iter().flatten().fold(0.0f64, |m, c| m.max(c.abs()));
+    (size > 0.0).then(|| half.map(|q| q.map(|c| c / size)))
+}
+
+/// Relative tolerance of [`is_degenerate_quad`]: far above the rounding of exact
+/// coincidence or collinearity (~1e-16), far below any quad meant to have area.
+pub const DEGENERATE_QUAD_TOL: f64 = 1e-12;
+
+/// True when the quad `p` has no area to speak of: a non-finite corner; two corners at
+/// one position (closer than [`DEGENERATE_QUAD_TOL`] × the quad's diameter, the
+/// largest corner-to-corner distance; all four at one point included); or no vector
+/// area (|(p2 − p0) × (p3 − p1)| ≤ [`DEGENERATE_QUAD_TOL`] × diameter², which covers
+/// four corners on one line and quads folded flat onto themselves). Scale- and
+/// translation-invariant, like [`quad_shape`]; every quad that [`quad_shape`] calls
+/// degenerate (and [`MeshMetrics::degenerate_quads`] counts) is degenerate here too.
+pub fn is_degenerate_quad(p: &[[f64; 3]; 4]) -> bool {
+    // The same frame as `quad_shape`, so exact zeros there are zeros here.
+    let Some(q) = unit_quad(p) else { return true };
+    let mut dist = [0.0f64; 6];
+    let mut k = 0;
+    for i in 0..4 {
+        for j in i + 1..4 {
+            dist[k] = norm(sub(q[i], q[j]));
+            k += 1;
+        }
+    }
+    let diameter = dist.iter().fold(0.0f64, |m, &d| m.max(d));
+    let shortest = dist.iter().fold(f64::INFINITY, |m, &d| m.min(d));
+    let area2 = norm(cross(sub(q[2], q[0]), sub(q[3], q[1])));
+    shortest <= DEGENERATE_QUAD_TOL * diameter || area2 <= DEGENERATE_QUAD_TOL * diameter * diameter
+}
+
 /// Shape measures of the quad `p` (DESIGN §2): e_i = p_{i+1} − p_i,
 /// c_i = e_{i−1} × e_i, n = normalize((p2 − p0) × (p3 − p1)), scaled Jacobian =
 /// min_i (c_i · n) / (|e_{i−1}| |e_i|). A quad with a zero-length edge, an undefined
@@ -231,19 +284,7 @@ pub struct QuadShape {
 /// the element's Jacobian vanishes), no edge ratio, no angles.
 pub fn quad_shape(p: &[[f64; 3]; 4]) -> QuadShape {
     const DEGENERATE: QuadShape = QuadShape { scaled_jacobian: 0.0, edge_ratio: None, angles_deg: None };
-    if p.iter().flatten().any(|c| !c.is_finite()) {
-        return DEGENERATE;
-    }
-    // Every measure is invariant under translation and uniform scale, so work on the
-    // quad moved to p0 and scaled to unit size: a huge (1e200) or tiny (1e-200) but
-    // finite quad would otherwise overflow or underflow in the squared lengths and be
-    // called degenerate. Halving first keeps the differences themselves finite.
-    let half: [[f64; 3]; 4] = std::array::from_fn(|i| std::array::from_fn(|k| 0.5 * p[i][k] - 0.5 * p[0][k]));
-    let size = half.iter().flatten().fold(0.0f64, |m, c| m.max(c.abs()));
-    if size == 0.0 {
-        return DEGENERATE;
-    }
-    let p: [[f64; 3]; 4] = half.map(|q| q.map(|c| c / size));
+    let Some(p) = unit_quad(p) else { return DEGENERATE };
     let e: [[f64; 3]; 4] = std::array::from_fn(|i| sub(p[(i + 1) % 4], p[i]));
     let len: [f64; 4] = std::array::from_fn(|i| norm(e[i]));
     if len.iter().any(|&l| !(l > 0.0 && l.is_finite())) {
@@ -456,9 +497,11 @@ fn mean_nearest(from: &[[f64; 3]], to: &[[f64; 3]]) -> f64 {
 /// tolerance, count as one vertex: split seams do not hide faces); a ground-truth face counts as recalled when
 /// some counted predicted face has its vertex set.
 ///
+/// An empty prediction scores as documented on [`GtMetrics`].
+///
 /// # Errors
 /// `InvalidInput` when the ground truth has no face, no finite vertex or a zero
-/// bounding-box diagonal, or when the prediction has no finite face vertex.
+/// bounding-box diagonal.
 pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
     if gt.faces.is_empty() {
         return Err(Error::invalid("ground-truth mesh has no faces"));
@@ -494,11 +537,11 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
 
     let mut rng = Rng::new(seed);
     let (mut rng_pred, mut rng_gt) = (rng.fork(1), rng.fork(2));
-    let sp = sample_surface(&pred_f, CHAMFER_SAMPLES, &mut rng_pred)
-        .ok_or_else(|| Error::invalid("predicted mesh has no finite face vertex to sample"))?;
     let sg = sample_surface(&gt_f, CHAMFER_SAMPLES, &mut rng_gt)
         .ok_or_else(|| Error::invalid("ground-truth mesh has no finite face vertex to sample"))?;
-    let (p2g, g2p) = crate::par::join(|| mean_nearest(&sp, &sg), || mean_nearest(&sg, &sp));
+    // `None`: the prediction has no face with a finite vertex, so nothing to sample.
+    let chamfer_parts = sample_surface(&pred_f, CHAMFER_SAMPLES, &mut rng_pred)
+        .map(|sp| crate::par::join(|| mean_nearest(&sp, &sg), || mean_nearest(&sg, &sp)));
 
     // Vertex matching: nearest ground-truth vertex, accepted within the tolerance
     // (checked in f64).
@@ -551,11 +594,12 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
         }
     }
     Ok(GtMetrics {
-        chamfer: p2g + g2p,
-        chamfer_pred_to_gt: p2g,
-        chamfer_gt_to_pred: g2p,
+        chamfer: chamfer_parts.map(|(p2g, g2p)| p2g + g2p),
+        chamfer_pred_to_gt: chamfer_parts.map(|(p2g, _)| p2g),
+        chamfer_gt_to_pred: chamfer_parts.map(|(_, g2p)| g2p),
         precision: ratio(hits, pred.faces.len()),
         recall: ratio(recalled.iter().filter(|r| **r).count(), gt.faces.len()),
+        empty_prediction: chamfer_parts.is_none(),
         matched_vertices,
     })
 }
@@ -574,20 +618,7 @@ mod tests {
 
     /// An open nu × nv grid of unit quads in the z = 0 plane.
     fn grid(nu: u32, nv: u32) -> PolyMesh {
-        let mut vertices = Vec::new();
-        for j in 0..=nv {
-            for i in 0..=nu {
-                vertices.push([i as f64, j as f64, 0.0]);
-            }
-        }
-        let id = |i: u32, j: u32| j * (nu + 1) + i;
-        let mut faces = Vec::new();
-        for j in 0..nv {
-            for i in 0..nu {
-                faces.push(vec![id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
-        PolyMesh { vertices, faces }
+        PolyMesh::from(&crate::mesh::shapes::grid(nu as usize, nv as usize, nu as f64, nv as f64))
     }
 
     /// Closed unit cube, outward-facing quads, offset by `o`.
@@ -672,6 +703,33 @@ mod tests {
     }
 
     #[test]
+    fn degenerate_quads_by_position() {
+        let sq = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+        assert!(!is_degenerate_quad(&sq));
+        let cases: [[[f64; 3]; 4]; 7] = [
+            [[2.0, 3.0, 4.0]; 4],                                                 // one point
+            [sq[0], sq[0], sq[2], sq[3]],                                         // adjacent repeat
+            [sq[0], sq[1], sq[0], sq[3]],                                         // diagonal repeat
+            [[0.0; 3], [0.1, 0.2, 0.3], [0.2, 0.4, 0.6], [0.3, 0.6, 0.9]],        // collinear, rounded
+            [[0.0; 3], [2.0, 0.0, 0.0], [1.0, 0.0, 0.0], [3.0, 0.0, 0.0]],        // collinear, folded
+            [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [2.0, 0.0, 0.0], [3.0, 1.0, 0.0]], // zigzag: no vector area
+            [sq[0], [f64::NAN, 0.0, 0.0], sq[2], sq[3]],
+        ];
+        for c in &cases {
+            assert!(is_degenerate_quad(c), "{c:?}");
+            // Scale does not rescue or condemn a quad.
+            let big = c.map(|p| p.map(|x| x * 1e200));
+            let tiny = c.map(|p| p.map(|x| x * 1e-200));
+            assert!(is_degenerate_quad(&big) && is_degenerate_quad(&tiny), "{c:?}");
+        }
+        for k in [1e-200, 1e-5, 1e200] {
+            assert!(!is_degenerate_quad(&sq.map(|p| p.map(|x| x * k + 7.0 * k))));
+        }
+        // A thin but real sliver (aspect 1e-6) keeps its area.
+        assert!(!is_degenerate_quad(&[[0.0; 3], [1.0, 0.0, 0.0], [1.0, 1e-6, 0.0], [0.0, 1e-6, 0.0]]));
+    }
+
+    #[test]
     fn empty_mesh_is_all_zeros() {
         let m = mesh_metrics(&PolyMesh::default());
         assert!(m.quad_only);
@@ -680,8 +738,22 @@ mod tests {
         assert_eq!((m.angle_dev_deg, m.angle_rms_deg, m.scaled_jacobian_min), (0.0, 0.0, 0.0));
         let v = PolyMesh { vertices: vec![[1.0; 3]], faces: vec![] };
         assert_eq!(mesh_metrics(&v).unreferenced_vertices, 1);
-        assert!(compare(&PolyMesh::default(), &cube([0.0; 3]), 0).is_err());
+        // The ground truth must have faces; an empty prediction is scored.
         assert!(compare(&cube([0.0; 3]), &PolyMesh::default(), 0).is_err());
+        let gt = cube([0.0; 3]);
+        let points_only = PolyMesh { vertices: gt.vertices.clone(), faces: vec![] };
+        let nan_faces = PolyMesh { vertices: vec![[f64::NAN; 3]; 4], faces: vec![vec![0, 1, 2, 3]] };
+        for (pred, matched) in [(PolyMesh::default(), 0), (points_only, 8), (nan_faces, 0)] {
+            let r = compare(&pred, &gt, 0).unwrap();
+            assert!(r.empty_prediction, "{r:?}");
+            assert_eq!((r.precision, r.recall, r.matched_vertices), (0.0, 0.0, matched), "{r:?}");
+            assert_eq!((r.chamfer, r.chamfer_pred_to_gt, r.chamfer_gt_to_pred), (None, None, None));
+        }
+        // One real face is not empty: Chamfer is defined, recall 1/6.
+        let one = PolyMesh { vertices: gt.vertices.clone(), faces: vec![gt.faces[0].clone()] };
+        let r = compare(&one, &gt, 0).unwrap();
+        assert!(!r.empty_prediction && r.chamfer.is_some_and(|c| c > 0.0), "{r:?}");
+        assert_eq!((r.precision, r.recall), (1.0, 1.0 / 6.0));
     }
 
     #[test]

@@ -76,16 +76,8 @@ pub fn gemm(
     beta: f32,
 ) {
     assert!(c.len() >= m * n, "internal error: gemm output buffer too small");
-    if m == 0 || n == 0 {
-        return;
-    }
-    if k == 0 {
-        for x in c[..m * n].iter_mut() {
-            *x = if beta == 0.0 { 0.0 } else { *x * beta };
-        }
-        return;
-    }
     assert!(a.len() >= m * k && b.len() >= k * n, "internal error: gemm input buffer too small");
+    // The whole operand is one block; `gemm_block` handles the empty cases.
     gemm_block(m, n, k, a, ta, m, 0, b, tb, &mut c[..m * n], beta);
 }
 

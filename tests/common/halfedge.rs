@@ -18,22 +18,11 @@ pub struct TestMesh {
     pub genus: usize,
 }
 
-/// An n×m grid of unit quads in the plane z = 0 (open, a disk).
+/// An n×m grid of unit quads in the plane z = 0 (open, a disk); vertex (i, j) is
+/// (n + 1) j + i.
 pub fn grid(n: u32, m: u32) -> TestMesh {
-    let mut positions = Vec::new();
-    for j in 0..=m {
-        for i in 0..=n {
-            positions.push([i as f64, j as f64, 0.0]);
-        }
-    }
-    let mut quads = Vec::new();
-    for j in 0..m {
-        for i in 0..n {
-            let a = j * (n + 1) + i;
-            quads.push([a, a + 1, a + n + 2, a + n + 1]);
-        }
-    }
-    TestMesh { name: "grid", positions, quads, closed: false, genus: 0 }
+    let g = shapes::grid(n as usize, m as usize, n as f64, m as f64);
+    TestMesh { name: "grid", positions: g.vertices, quads: g.quads, closed: false, genus: 0 }
 }
 
 /// The outer surface of a set of unit voxels (face-connected, no checkerboard contacts),

@@ -6,22 +6,10 @@
 
 use point2quad::mesh::poly::PolyMesh;
 
-/// An open nu × nv grid of unit quads in the z = 0 plane, counter-clockwise seen from +z.
+/// An open nu × nv grid of unit quads in the z = 0 plane, counter-clockwise seen from +z;
+/// vertex (i, j) is (nu + 1) j + i.
 pub fn grid(nu: u32, nv: u32) -> PolyMesh {
-    let mut vertices = Vec::new();
-    for j in 0..=nv {
-        for i in 0..=nu {
-            vertices.push([i as f64, j as f64, 0.0]);
-        }
-    }
-    let id = |i: u32, j: u32| j * (nu + 1) + i;
-    let mut faces = Vec::new();
-    for j in 0..nv {
-        for i in 0..nu {
-            faces.push(vec![id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
-        }
-    }
-    PolyMesh { vertices, faces }
+    PolyMesh::from(&point2quad::mesh::shapes::grid(nu as usize, nv as usize, nu as f64, nv as f64))
 }
 
 /// A closed torus of nu × nv quads (major radius 1, minor r), outward-facing.

@@ -97,16 +97,7 @@ pub fn check_quad_mesh(m: &QuadMesh) -> MeshStats {
         assert_eq!(roots, 1, "vertex {v} is non-manifold: its {} faces form {roots} fans", w.len());
     }
     // Coincident vertices: sweep along x with a tolerance relative to the bounding box.
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for v in &m.vertices {
-        for a in 0..3 {
-            lo[a] = lo[a].min(v[a]);
-            hi[a] = hi[a].max(v[a]);
-        }
-    }
-    let diag = ((0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum::<f64>()).sqrt();
-    let tol = 1e-9 * diag;
+    let tol = 1e-9 * bbox_diag(m);
     let mut order: Vec<usize> = (0..nv).collect();
     order.sort_by(|&a, &b| m.vertices[a][0].total_cmp(&m.vertices[b][0]));
     for i in 0..nv {

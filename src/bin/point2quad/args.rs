@@ -87,6 +87,21 @@ impl Args {
         }
     }
 
+    /// [`Args::parsed`], then checked to lie in `lo..=hi`; otherwise a usage error
+    /// naming the option, the bounds, the value and `why` (the reason for the bound).
+    pub fn parsed_in<T>(&self, cmd: &str, name: &str, default: T, lo: T, hi: T, why: &str) -> Result<T, Error>
+    where
+        T: std::str::FromStr + PartialOrd + std::fmt::Display,
+    {
+        let v = self.parsed(cmd, name, default)?;
+        if v < lo || v > hi {
+            return Err(Error::Usage(format!(
+                "{cmd}: {name} must be between {lo} and {hi}, got {v} ({why})"
+            )));
+        }
+        Ok(v)
+    }
+
     /// Whether switch `name` was given.
     pub fn switch(&self, name: &str) -> bool {
         self.switches.iter().any(|s| s == name)
@@ -131,6 +146,25 @@ mod tests {
 
     /// Regression: `-o=` gave an empty output name, and the write failed with
     /// ": not a file path", naming nothing.
+    #[test]
+    fn bounded_values() {
+        let spec = Spec { valued: &["--k"], switches: &[] };
+        let k = |argv: &[&str]| {
+            Args::parse("x", &v(argv), &spec).unwrap().parsed_in("x", "--k", 20usize, 3, 64, "why")
+        };
+        assert_eq!(k(&[]).unwrap(), 20);
+        assert_eq!(k(&["--k", "3"]).unwrap(), 3);
+        assert_eq!(k(&["--k", "64"]).unwrap(), 64);
+        for bad in ["2", "65", "18446744073709551615"] {
+            let e = k(&["--k", bad]).unwrap_err().to_string();
+            assert!(
+                e.contains("--k must be between 3 and 64") && e.contains(bad) && e.contains("why"),
+                "{e}"
+            );
+        }
+        assert!(k(&["--k", "-1"]).unwrap_err().to_string().contains("cannot parse"));
+    }
+
     #[test]
     fn empty_option_values_are_usage_errors() {
         let spec = Spec { valued: &["-o"], switches: &[] };

@@ -24,7 +24,8 @@ USAGE:
 OPTIONS:
     --out DIR         output folder (created if missing): one <name>.p2qs per sample
                       and index.txt (file, points, candidates, positives, coverage)
-    --synthetic N     N random synthetic quad meshes (all shape families, random pose)
+    --synthetic N     N random synthetic quad meshes (all shape families, random pose;
+                      at most 100000)
     --meshes DIR      every .obj/.off/.ply file directly in DIR (sorted by name)
     --noise F         noise points per mesh vertex (default 0.1)
     --offset F        largest noise offset along the face normal, as a fraction of
@@ -36,6 +37,11 @@ not pure-quad is skipped with a warning naming it; the run fails if a sample can
 written. Progress goes to stderr, one line per sample. Sample k (synthetic first, then
 the meshes in name order) uses its own random stream derived from the seed and k.
 ";
+
+/// Largest `--synthetic`: each sample costs about a second on two cores and writes a
+/// file, so 100,000 is already a day's run; the bound catches typos (and a job list
+/// sized by a 20-digit number) before any work or any folder is made.
+const MAX_SYNTHETIC: usize = 100_000;
 
 /// Where a sample comes from.
 enum Job {
@@ -58,7 +64,14 @@ pub fn run(argv: &[String]) -> Result<()> {
         )));
     }
     let out = PathBuf::from(args.required(CMD, "--out")?);
-    let synthetic: usize = args.parsed(CMD, "--synthetic", 0)?;
+    let synthetic: usize = args.parsed_in(
+        CMD,
+        "--synthetic",
+        0,
+        0,
+        MAX_SYNTHETIC,
+        "about a second of work and a file per sample",
+    )?;
     let seed: u64 = args.parsed(CMD, "--seed", 0)?;
     let noise = NoiseConfig {
         fraction: args.parsed(CMD, "--noise", NoiseConfig::default().fraction)?,

@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use crate::args::{Args, Spec};
-use point2quad::io::mesh_io::read_mesh;
+use point2quad::io::mesh_io::{read_mesh, read_mesh_allow_empty};
 use point2quad::mesh::quality::{compare, mesh_metrics, GtMetrics, MeshMetrics};
 use point2quad::{Error, Result};
 
@@ -27,6 +27,13 @@ ARGS:
 
 Shape measures (scaled Jacobian, edge ratio, angle deviation) use quad faces only;
 other faces are counted. Edges are the undirected sides of the faces.
+
+An empty PRED (no faces: vertices only, or a well-formed file with nothing in it) is
+scored, not refused: every count is 0, quad-only is vacuously true, watertightness
+and manifoldness are 0 (0 of 0 edges; an empty output must never score as perfect),
+and the shape means are 0. With --gt: precision 0 (0 of 0 faces, scored 0), recall 0,
+and Chamfer undefined (the distance to an empty surface is unbounded): `null` in
+--json, with \"empty_prediction\": true, and a note on stderr. GT must have faces.
 ";
 
 /// Runs `point2quad eval` on its arguments (after the subcommand name).
@@ -38,7 +45,8 @@ pub fn run(argv: &[String]) -> Result<()> {
     let args = Args::parse("eval", argv, &spec)?;
     let pred_path = &args.expect_positional("eval", 1, "one mesh PRED")?[0];
     let seed: u64 = args.parsed("eval", "--seed", 0)?;
-    let pred = read_mesh(Path::new(pred_path))?;
+    // An empty prediction is a result to score (see HELP); the ground truth is not.
+    let pred = read_mesh_allow_empty(Path::new(pred_path))?;
     let metrics = mesh_metrics(&pred);
     let gt = match args.value("--gt") {
         Some(g) => {
@@ -51,6 +59,12 @@ pub fn run(argv: &[String]) -> Result<()> {
         }
         None => None,
     };
+    if gt.as_ref().is_some_and(|g| g.empty_prediction) {
+        eprintln!(
+            "point2quad eval: note: {pred_path} has no faces to sample (empty prediction): \
+             precision 0, recall 0, Chamfer undefined"
+        );
+    }
     if args.switch("--json") {
         crate::output::stdout(&format!("{}\n", to_json(&metrics, gt.as_ref())))?;
     } else {
@@ -66,6 +80,11 @@ fn num(x: f64) -> String {
     } else {
         "null".into()
     }
+}
+
+/// A JSON number, or `null` for an undefined value (Chamfer of an empty prediction).
+fn opt_num(x: Option<f64>) -> String {
+    x.map_or_else(|| "null".into(), num)
 }
 
 /// One JSON object (keys of DESIGN §7 first, then the extra counts).
@@ -92,12 +111,13 @@ fn to_json(m: &MeshMetrics, gt: Option<&GtMetrics>) -> String {
     ];
     if let Some(g) = gt {
         fields.extend([
-            ("chamfer", num(g.chamfer)),
-            ("chamfer_pred_to_gt", num(g.chamfer_pred_to_gt)),
-            ("chamfer_gt_to_pred", num(g.chamfer_gt_to_pred)),
+            ("chamfer", opt_num(g.chamfer)),
+            ("chamfer_pred_to_gt", opt_num(g.chamfer_pred_to_gt)),
+            ("chamfer_gt_to_pred", opt_num(g.chamfer_gt_to_pred)),
             ("precision", num(g.precision)),
             ("recall", num(g.recall)),
             ("matched_vertices", g.matched_vertices.to_string()),
+            ("empty_prediction", g.empty_prediction.to_string()),
         ]);
     }
     let body: Vec<String> = fields.iter().map(|(k, v)| format!("\"{k}\": {v}")).collect();
@@ -124,13 +144,11 @@ fn to_table(path: &str, m: &MeshMetrics, gt: Option<&GtMetrics>) -> String {
     row("angle |θ−90°|", format!("{:.3}° mean, {:.3}° RMS", m.angle_dev_deg, m.angle_rms_deg));
     row("degenerate quads", m.degenerate_quads.to_string());
     if let Some(g) = gt {
-        row(
-            "Chamfer (/ GT diagonal)",
-            format!(
-                "{:.6} (pred→GT {:.6} + GT→pred {:.6})",
-                g.chamfer, g.chamfer_pred_to_gt, g.chamfer_gt_to_pred
-            ),
-        );
+        let chamfer = match (g.chamfer, g.chamfer_pred_to_gt, g.chamfer_gt_to_pred) {
+            (Some(c), Some(p2g), Some(g2p)) => format!("{c:.6} (pred→GT {p2g:.6} + GT→pred {g2p:.6})"),
+            _ => "undefined (empty prediction: no faces to sample)".into(),
+        };
+        row("Chamfer (/ GT diagonal)", chamfer);
         row("face precision", format!("{:.4}", g.precision));
         row("face recall", format!("{:.4}", g.recall));
         row("matched vertices", g.matched_vertices.to_string());

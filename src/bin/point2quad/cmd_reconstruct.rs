@@ -1,6 +1,7 @@
 //! `point2quad reconstruct`: point cloud in, manifold pure-quad mesh out.
 
 use crate::args::{Args, Spec};
+use crate::cmd_candidates::MAX_K;
 use point2quad::io::mesh_io::write_mesh;
 use point2quad::io::points::read_points;
 use point2quad::mesh::poly::PolyMesh;
@@ -31,10 +32,6 @@ OPTIONS:
     --k K                 neighbours searched per point for candidates, 3 to 64 [20]
 ";
 
-/// Largest `--k`: candidate enumeration grows with the cube of k (k = 100000 on 300
-/// points ran for minutes); DESIGN §2 finds coverage saturated at k = 20.
-const MAX_K: usize = 64;
-
 const SPEC: Spec = Spec {
     valued: &["-o", "--output", "--model", "--svg", "--threshold", "--k"],
     switches: &["--no-postprocess"],
@@ -58,10 +55,8 @@ pub fn run(argv: &[String]) -> Result<()> {
     })?);
     let mut cfg = ReconstructConfig { run_postprocess: !a.switch("--no-postprocess"), ..Default::default() };
     cfg.threshold = a.parsed(cmd, "--threshold", cfg.threshold)?;
-    cfg.candidates.k = a.parsed(cmd, "--k", cfg.candidates.k)?;
-    if !(3..=MAX_K).contains(&cfg.candidates.k) {
-        return Err(Error::Usage(format!("{cmd}: --k must be between 3 and {MAX_K}")));
-    }
+    cfg.candidates.k =
+        a.parsed_in(cmd, "--k", cfg.candidates.k, 3, MAX_K, "work grows with the cube of k")?;
     // Check the output format before the work, not after it.
     point2quad::io::mesh_io::MeshFormat::from_path(&out)?;
     let t0 = std::time::Instant::now();

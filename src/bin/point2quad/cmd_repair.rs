@@ -16,7 +16,9 @@ USAGE:
     point2quad repair MESH -o OUT.{obj,ply,off} [OPTIONS]
 
 MESH is an .obj, .off or .ply file whose faces may overlap, repeat or be non-manifold.
-Steps: (a) the paper's filter deletes the worst-scoring face while any face scores above
+First, quads that repeat a vertex (\"degenerate\") or have no area (\"zero-area\": two
+corners at one position, all four at one point, or all on one line; within 1e-12 of the
+quad's size) are dropped and counted. Steps: (a) the paper's filter deletes the worst-scoring face while any face scores above
 the limit (score (boundary edges + 1)(10 non-manifold edges + 1)); (b) the survivors are
 inserted by priority, refusing any face that would break manifoldness (opposite-oriented
 patches are flipped to agree); (c) greedy hole filling. Closed components are then turned
@@ -83,8 +85,9 @@ pub fn run(argv: &[String]) -> Result<()> {
 
     eprintln!("repair {input} -> {output}");
     eprintln!(
-        "  faces read {}, non-quads dropped {dropped}, degenerate dropped {}",
-        rep.faces_in, rep.degenerate
+        "  faces read {}, non-quads dropped {dropped}, degenerate dropped {} (repeated vertex), \
+         zero-area dropped {} (coincident or collinear corners)",
+        rep.faces_in, rep.degenerate, rep.zero_area
     );
     if cfg.score_filter {
         eprintln!("  score filter (limit {}): removed {}", cfg.score_limit, rep.removed_by_score);

@@ -1,0 +1,90 @@
+//! Upper bounds on the numeric CLI options that size work (`candidates --k/--per-point`,
+//! `reconstruct --k`, `dataset --synthetic`): the bound itself is accepted, one past it
+//! (and a 20-digit value) is a usage error (exit 2) naming the option, the bounds and the
+//! value, before any file is read or written.
+
+#[path = "common/scratch.rs"]
+mod scratch;
+
+use std::process::{Command, Output};
+
+use scratch::Scratch;
+
+fn p2q(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_point2quad")).args(args).output().expect("test: run the binary")
+}
+
+/// A gently curved 6 × 5 sheet of points, as .xyz text (small: at k = 64 every point
+/// sees the whole sheet, and C(29, 3) triples per point keep the test quick).
+fn sheet() -> String {
+    let mut s = String::new();
+    for j in 0..5 {
+        for i in 0..6 {
+            let (x, y) = (i as f64 * 0.1, j as f64 * 0.1);
+            s.push_str(&format!("{x} {y} {}\n", 0.05 * (x * 3.0).sin()));
+        }
+    }
+    s
+}
+
+#[test]
+fn work_sizing_options_are_bounded() {
+    let dir = Scratch::new("cli_bounds");
+    let c = &dir.write("sheet.xyz", sheet().as_bytes());
+    let (cand, mesh, ds) = (dir.p("c.txt"), dir.p("m.obj"), dir.p("ds"));
+    let huge = "18446744073709551615"; // usize::MAX: `8 * per_point` overflowed before
+    let before = dir.entries();
+    let refused: Vec<(Vec<&str>, &str, &str)> = vec![
+        (vec!["candidates", c, "-o", &cand, "--k", "65"], "--k must be between 3 and 64", "65"),
+        (vec!["candidates", c, "-o", &cand, "--k", "2"], "--k must be between 3 and 64", "2"),
+        (vec!["candidates", c, "-o", &cand, "--k", huge], "--k must be between 3 and 64", huge),
+        (
+            vec!["candidates", c, "-o", &cand, "--per-point", "1025"],
+            "--per-point must be between 1 and 1024",
+            "1025",
+        ),
+        (
+            vec!["candidates", c, "-o", &cand, "--per-point", "0"],
+            "--per-point must be between 1 and 1024",
+            "0",
+        ),
+        (
+            vec!["candidates", c, "-o", &cand, "--per-point", huge],
+            "--per-point must be between 1 and 1024",
+            huge,
+        ),
+        (vec!["reconstruct", c, "-o", &mesh, "--k", "65"], "--k must be between 3 and 64", "65"),
+        (vec!["reconstruct", c, "-o", &mesh, "--k", huge], "--k must be between 3 and 64", huge),
+        (
+            vec!["dataset", "--out", &ds, "--synthetic", "100001"],
+            "--synthetic must be between 0 and 100000",
+            "100001",
+        ),
+        (
+            vec!["dataset", "--out", &ds, "--synthetic", huge],
+            "--synthetic must be between 0 and 100000",
+            huge,
+        ),
+    ];
+    for (args, msg, value) in &refused {
+        let out = p2q(args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(msg) && err.contains(&format!("got {value}")), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert_eq!(dir.entries(), before, "{args:?}: files left behind");
+    }
+    // The bounds themselves are accepted and do the work.
+    for args in [
+        vec!["candidates", c, "-o", &cand, "--k", "64", "--per-point", "1024"],
+        vec!["candidates", c, "-o", &cand, "--k", "3", "--per-point", "1"],
+    ] {
+        let out = p2q(&args);
+        assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        let text = std::fs::read_to_string(&cand).expect("test: candidates written");
+        for line in text.lines() {
+            let idx: Vec<usize> = line.split(' ').map(|t| t.parse().expect("test: index")).collect();
+            assert!(idx.len() == 4 && idx.iter().all(|&i| i < 30), "{line}");
+        }
+    }
+}

@@ -83,6 +83,7 @@ bench:
 	$(CARGO) bench --bench candidates
 	$(CARGO) bench --bench train_step
 	$(CARGO) bench --bench reconstruct
+	$(CARGO) bench --bench io_parse
 
 # The full candidate-coverage measurement (all train meshes, clean and noisy, plus the
 # synthetic shapes); make test runs the same test on a subset of the train meshes.

@@ -6,6 +6,9 @@
 
 #[path = "common/kpconv.rs"]
 mod kpc;
+#[path = "common/training.rs"]
+mod training;
+use training::{bits, no_progress, samples, train_cfg};
 
 use point2quad::mesh::halfedge::HalfedgeMesh;
 use point2quad::mesh::poly::{PolyMesh, QuadMesh};
@@ -13,12 +16,11 @@ use point2quad::mesh::shapes;
 use point2quad::mesh::validate::validate;
 use point2quad::nn::checkpoint::{Checkpoint, TrainState};
 use point2quad::nn::kpfcnn::{prepare, KpfcnnConfig};
-use point2quad::pipeline::candidates::CandidateConfig;
-use point2quad::pipeline::dataset::{build_sample, Sample};
+use point2quad::pipeline::dataset::Sample;
 use point2quad::pipeline::model::{corner_indices, Model, ModelConfig};
 use point2quad::pipeline::noise::{noise_points, NoiseConfig};
 use point2quad::pipeline::reconstruct::{reconstruct, ReconstructConfig};
-use point2quad::pipeline::train::{evaluate, sample_input, train, Progress, TrainConfig};
+use point2quad::pipeline::train::{evaluate, sample_input, train};
 use point2quad::rng::Rng;
 use point2quad::tensor::{gradcheck, GradCheckConfig, Tensor};
 use std::path::Path;
@@ -130,41 +132,6 @@ fn whole_model_gradcheck_train_mode() {
     let (checked, _) = whole_model_gradcheck(cfg, 24, &gc);
     assert!(checked > 150, "{checked}");
 }
-
-/// Three small noisy shapes through `dataset::build_sample` (~100–200 points each).
-fn samples() -> Vec<Sample> {
-    let meshes: [(&str, QuadMesh); 3] = [
-        ("sphere", shapes::cube_sphere(4)),
-        ("torus", shapes::torus(12, 6, 1.0, 0.4)),
-        ("hill", shapes::height_field(9, 9, |u, v| 0.3 * (2.0 * u).sin() * v)),
-    ];
-    let cand = CandidateConfig { k: 12, per_point: 8, ..CandidateConfig::default() };
-    meshes
-        .iter()
-        .enumerate()
-        .map(|(i, (name, m))| {
-            let mut rng = Rng::new(100 + i as u64);
-            build_sample(name, m, &NoiseConfig::default(), &cand, &mut rng).expect("test: sample")
-        })
-        .collect()
-}
-
-/// Candidate subsampling and rotations on, so resuming must restore the RNG too.
-fn train_cfg(epochs: usize) -> TrainConfig {
-    TrainConfig { epochs, seed: 11, max_candidates: 200, ..TrainConfig::default() }
-}
-
-/// Every tensor of the store (parameters, batch-norm buffers, kernel points) as bits.
-fn bits(m: &Model) -> Vec<(String, Vec<u32>)> {
-    m.params
-        .ids()
-        .map(|id| {
-            (m.params.name(id).to_string(), m.params.get(id).data().iter().map(|x| x.to_bits()).collect())
-        })
-        .collect()
-}
-
-fn no_progress(_: Progress) {}
 
 /// Predictions of `m` on every sample, as bits.
 fn prediction_bits(m: &Model, data: &[Sample]) -> Vec<u32> {

@@ -2,53 +2,16 @@
 //! `dataset::build_sample`): resuming from a checkpoint image is bit-identical to
 //! training straight through, and the loss goes down on a fixed set.
 
-use point2quad::mesh::poly::QuadMesh;
-use point2quad::mesh::shapes;
 use point2quad::nn::checkpoint::{Checkpoint, TrainState};
-use point2quad::pipeline::candidates::CandidateConfig;
-use point2quad::pipeline::dataset::{build_sample, Sample};
 use point2quad::pipeline::model::{Model, ModelConfig};
-use point2quad::pipeline::noise::NoiseConfig;
-use point2quad::pipeline::train::{train, Progress, TrainConfig};
-use point2quad::rng::Rng;
+use point2quad::pipeline::train::{train, TrainConfig};
 use point2quad::tensor::Tensor;
 use point2quad::Result;
+
+#[path = "common/training.rs"]
+mod training;
 use std::path::Path;
-
-fn samples() -> Vec<Sample> {
-    let meshes: [(&str, QuadMesh); 3] = [
-        ("sphere", shapes::cube_sphere(4)),
-        ("torus", shapes::torus(12, 6, 1.0, 0.4)),
-        ("hill", shapes::height_field(9, 9, |u, v| 0.3 * (2.0 * u).sin() * v)),
-    ];
-    let cand = CandidateConfig { k: 12, per_point: 8, ..CandidateConfig::default() };
-    meshes
-        .iter()
-        .enumerate()
-        .map(|(i, (name, m))| {
-            let mut rng = Rng::new(100 + i as u64);
-            build_sample(name, m, &NoiseConfig::default(), &cand, &mut rng).expect("test: sample")
-        })
-        .collect()
-}
-
-/// Subsampling (200 of ~300 candidates) and rotations on: the resume test must see
-/// the RNG state restored, not only the weights.
-fn cfg(epochs: usize) -> TrainConfig {
-    TrainConfig { epochs, seed: 11, max_candidates: 200, ..TrainConfig::default() }
-}
-
-/// Every tensor of the store (parameters and batch-norm buffers), by name, as bits.
-fn bits(m: &Model) -> Vec<(String, Vec<u32>)> {
-    m.params
-        .ids()
-        .map(|id| {
-            (m.params.name(id).to_string(), m.params.get(id).data().iter().map(|x| x.to_bits()).collect())
-        })
-        .collect()
-}
-
-fn no_progress(_: Progress) {}
+use training::{bits, no_progress, samples, train_cfg as cfg};
 
 #[test]
 fn resume_from_checkpoint_bytes_is_bit_identical() {

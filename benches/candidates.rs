@@ -17,16 +17,11 @@ use point2quad::rng::Rng;
 use std::hint::black_box;
 use std::time::Instant;
 
-const RUNS: usize = 7;
+#[path = "common/mod.rs"]
+mod common;
+use common::cpu_ms;
 
-/// Process CPU time (user + system, all threads) in ms from `/proc/self/stat`, whose clock ticks
-/// are `USER_HZ` = 100 per second on Linux; `None` elsewhere.
-fn cpu_ms() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
-    let ticks: u64 = fields.get(11)?.parse::<u64>().ok()? + fields.get(12)?.parse::<u64>().ok()?;
-    Some(ticks as f64 * 10.0)
-}
+const RUNS: usize = 7;
 
 fn main() {
     let mesh = shapes::torus(130, 70, 1.0, 0.4);

@@ -4,14 +4,16 @@
 //! Lines: `bench <name> <value> <unit>`, medians of several runs after a warm-up.
 //! Threads follow `RAYON_NUM_THREADS`.
 
-use std::time::Instant;
-
 use point2quad::nn::kpconv::{kpconv_forward, KpConvGeometry};
 use point2quad::nn::kpfcnn::{prepare, Kpfcnn, KpfcnnConfig, PointPyramid};
 use point2quad::rng::Rng;
 use point2quad::spatial::kdtree::KdTree;
 use point2quad::spatial::neighborhoods::{nearest_upsampling, radius_neighborhoods};
 use point2quad::tensor::{Grads, Graph, ParamStore, Tensor};
+
+#[path = "common/mod.rs"]
+mod common;
+use common::{median_ms, peak_rss_mib, timed};
 
 const N: usize = 10_000;
 
@@ -21,43 +23,6 @@ fn cloud() -> Vec<[f32; 3]> {
     let m = point2quad::mesh::shapes::torus(200, 50, 0.7, 0.3);
     assert_eq!(m.vertices.len(), N, "torus vertex count");
     m.vertices.iter().map(|p| [p[0] as f32, p[1] as f32, p[2] as f32]).collect()
-}
-
-fn median_ms(runs: usize, mut f: impl FnMut()) -> f64 {
-    f();
-    let mut t: Vec<f64> = (0..runs)
-        .map(|_| {
-            let s = Instant::now();
-            f();
-            s.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    t.sort_by(|a, b| a.total_cmp(b));
-    t[runs / 2]
-}
-
-/// CPU time of the whole process (all threads), from /proc (clock ticks of 10 ms).
-fn cpu_ms() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
-    let rest = &s[s.rfind(')')? + 2..];
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
-    Some(ticks * 10.0)
-}
-
-/// Median wall time and mean CPU time (ms) over `runs` after a warm-up.
-fn timed(runs: usize, mut f: impl FnMut()) -> (f64, f64) {
-    let c0 = cpu_ms().unwrap_or(0.0);
-    let wall = median_ms(runs, &mut f);
-    let c1 = cpu_ms().unwrap_or(0.0);
-    (wall, (c1 - c0) / (runs + 1) as f64)
-}
-
-fn peak_rss_mib() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb / 1024.0)
 }
 
 fn per_level(name: &str, cfg: &KpfcnnConfig, pts: &[[f32; 3]], pyr: &PointPyramid, runs: usize) {

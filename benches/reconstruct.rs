@@ -22,32 +22,13 @@ use std::hint::black_box;
 use std::path::Path;
 use std::time::Instant;
 
+#[path = "common/mod.rs"]
+mod common;
+use common::{cpu_ms, median, peak_rss_mib};
+
 const RUNS: usize = 5;
 
 const SHIPPED_WEIGHTS: &[u8] = include_bytes!("../fixtures/point2quad-default.p2qm");
-
-/// Process CPU time (user + system, all threads) in ms from `/proc/self/stat`, whose clock ticks
-/// are `USER_HZ` = 100 per second on Linux; `None` elsewhere.
-fn cpu_ms() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
-    let ticks: u64 = fields.get(11)?.parse::<u64>().ok()? + fields.get(12)?.parse::<u64>().ok()?;
-    Some(ticks as f64 * 10.0)
-}
-
-/// Peak resident set in MiB from `VmHWM` of `/proc/self/status` (Linux); `None` elsewhere.
-fn peak_rss_mib() -> Option<f64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    // The line reads "VmHWM:   123456 kB".
-    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib / 1024.0)
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 fn main() {
     let mesh = shapes::torus(130, 70, 1.0, 0.4);

@@ -10,7 +10,6 @@
 //! warm-up. Threads follow `RAYON_NUM_THREADS`.
 
 use std::path::Path;
-use std::time::Instant;
 
 use point2quad::nn::kpfcnn::prepare;
 use point2quad::pipeline::candidates::CandidateConfig;
@@ -21,6 +20,10 @@ use point2quad::pipeline::train::{sample_input, train, TrainConfig};
 use point2quad::rng::Rng;
 use point2quad::tensor::{Grads, Graph, Tensor};
 
+#[path = "common/mod.rs"]
+mod common;
+use common::timed;
+
 fn sample() -> Sample {
     if let Ok(p) = std::env::var("P2Q_BENCH_SAMPLE") {
         return load_sample(Path::new(&p)).expect("P2Q_BENCH_SAMPLE: a readable .p2qs sample");
@@ -28,36 +31,6 @@ fn sample() -> Sample {
     let mesh = point2quad::mesh::shapes::torus(100, 91, 0.7, 0.3);
     build_sample("torus", &mesh, &NoiseConfig::default(), &CandidateConfig::default(), &mut Rng::new(1))
         .expect("synthetic sample")
-}
-
-/// CPU time of the whole process (all threads), from /proc (clock ticks of 10 ms).
-fn cpu_ms() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
-    let rest = &s[s.rfind(')')? + 2..];
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
-    Some(ticks * 10.0)
-}
-
-/// Median wall time (ms) after a warm-up, and mean CPU time per run (ms, warm-up included).
-fn timed(runs: usize, mut f: impl FnMut()) -> (f64, f64) {
-    let c0 = cpu_ms().unwrap_or(0.0);
-    let wall = median_ms(runs, &mut f);
-    let c1 = cpu_ms().unwrap_or(0.0);
-    (wall, (c1 - c0) / (runs + 1) as f64)
-}
-
-fn median_ms(runs: usize, mut f: impl FnMut()) -> f64 {
-    f();
-    let mut t: Vec<f64> = (0..runs)
-        .map(|_| {
-            let s = Instant::now();
-            f();
-            s.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    t.sort_by(|a, b| a.total_cmp(b));
-    t[runs / 2]
 }
 
 /// One epoch over a one-sample training set (= one step), no validation, no checkpoint.

@@ -8,19 +8,18 @@
 mod kpc;
 #[path = "common/training.rs"]
 mod training;
-use training::{bits, no_progress, samples, train_cfg};
+use training::{bits, check_resume, samples, Resumed};
 
 use point2quad::mesh::halfedge::HalfedgeMesh;
 use point2quad::mesh::poly::{PolyMesh, QuadMesh};
 use point2quad::mesh::shapes;
 use point2quad::mesh::validate::validate;
-use point2quad::nn::checkpoint::{Checkpoint, TrainState};
 use point2quad::nn::kpfcnn::{prepare, KpfcnnConfig};
 use point2quad::pipeline::dataset::Sample;
 use point2quad::pipeline::model::{corner_indices, Model, ModelConfig};
 use point2quad::pipeline::noise::{noise_points, NoiseConfig};
 use point2quad::pipeline::reconstruct::{reconstruct, ReconstructConfig};
-use point2quad::pipeline::train::{evaluate, sample_input, train};
+use point2quad::pipeline::train::{evaluate, sample_input};
 use point2quad::rng::Rng;
 use point2quad::tensor::{gradcheck, GradCheckConfig, Tensor};
 use std::path::Path;
@@ -147,42 +146,10 @@ fn prediction_bits(m: &Model, data: &[Sample]) -> Vec<u32> {
 #[test]
 fn kp_model_trains_and_resumes_bit_identically() {
     let data = samples();
-    let (tr, va) = (&data[..2], &data[2..]);
+    let va = &data[2..];
     let fresh = Model::new(small_kp_config(), 5).unwrap();
-    // Straight through: 2 epochs.
-    let mut straight = Model::new(small_kp_config(), 5).unwrap();
-    let mut states: Vec<TrainState> = Vec::new();
-    let reps = train(&mut straight, tr, va, &train_cfg(2), None, &mut no_progress, &mut |_, st| {
-        states.push(st.clone());
-        Ok(())
-    })
-    .unwrap();
-    assert_eq!(reps.len(), 2);
-    assert!(reps.iter().all(|r| r.loss.is_finite()));
-    // 1 epoch, checkpoint through bytes, resume for 1 more.
-    let mut first = Model::new(small_kp_config(), 5).unwrap();
-    let mut saved: Option<Vec<u8>> = None;
-    train(&mut first, tr, va, &train_cfg(1), None, &mut no_progress, &mut |m, st| {
-        saved = Some(m.to_checkpoint(Some(st.clone())).to_bytes());
-        Ok(())
-    })
-    .unwrap();
-    let ck = Checkpoint::from_bytes(&saved.expect("checkpoint callback ran"), Path::new("mem.ckpt")).unwrap();
-    let state = ck.train.clone().expect("state saved");
-    assert_eq!(&state, &states[0]);
-    let mut resumed = Model::from_checkpoint(&ck, Path::new("mem.ckpt")).unwrap();
-    assert_eq!(bits(&resumed), bits(&first), "checkpoint round trip");
-    let more = train(&mut resumed, tr, va, &train_cfg(2), Some(state), &mut no_progress, &mut |_, _| Ok(()))
-        .unwrap();
-    assert_eq!(more.len(), 1);
-    assert_eq!(more[0].loss.to_bits(), reps[1].loss.to_bits());
-    assert_eq!(more[0].val, reps[1].val);
-    let (a, b) = (bits(&straight), bits(&resumed));
-    assert_eq!(a.len(), b.len());
-    for ((na, ta), (nb, tb)) in a.iter().zip(&b) {
-        assert_eq!(na, nb);
-        assert!(ta == tb, "tensor {na} differs after resuming");
-    }
+    let Resumed { straight, reps, .. } = check_resume(small_kp_config(), &data);
+    let a = bits(&straight);
     // Training really reached the point encoder: its weights and batch-norm statistics moved,
     // its kernel points (fixed geometry) did not.
     let before = bits(&fresh);

@@ -2,7 +2,7 @@
 //! `dataset::build_sample`): resuming from a checkpoint image is bit-identical to
 //! training straight through, and the loss goes down on a fixed set.
 
-use point2quad::nn::checkpoint::{Checkpoint, TrainState};
+use point2quad::nn::checkpoint::TrainState;
 use point2quad::pipeline::model::{Model, ModelConfig};
 use point2quad::pipeline::train::{train, TrainConfig};
 use point2quad::tensor::Tensor;
@@ -10,49 +10,15 @@ use point2quad::Result;
 
 #[path = "common/training.rs"]
 mod training;
-use std::path::Path;
-use training::{bits, no_progress, samples, train_cfg as cfg};
+use training::{bits, check_resume, no_progress, samples, train_cfg as cfg, Resumed};
 
 #[test]
 fn resume_from_checkpoint_bytes_is_bit_identical() {
     let data = samples();
     let (tr, va) = (&data[..2], &data[2..]);
-    // Straight through: 2 epochs.
-    let mut straight = Model::new(ModelConfig::default_preset(), 5).unwrap();
-    let mut states: Vec<TrainState> = Vec::new();
-    let reps = train(&mut straight, tr, va, &cfg(2), None, &mut no_progress, &mut |_, st| {
-        states.push(st.clone());
-        Ok(())
-    })
-    .unwrap();
-    assert_eq!(reps.len(), 2);
-    // 1 epoch, checkpoint through bytes, resume for 1 more.
-    let mut first = Model::new(ModelConfig::default_preset(), 5).unwrap();
-    let mut saved: Option<Vec<u8>> = None;
-    train(&mut first, tr, va, &cfg(1), None, &mut no_progress, &mut |m, st| {
-        saved = Some(m.to_checkpoint(Some(st.clone())).to_bytes());
-        Ok(())
-    })
-    .unwrap();
-    let bytes = saved.expect("checkpoint callback ran");
-    let ck = Checkpoint::from_bytes(&bytes, Path::new("mem.ckpt")).unwrap();
-    let state = ck.train.clone().expect("state saved");
-    assert_eq!(state.epoch, 1);
-    assert_eq!(&state, &states[0], "the 1-epoch run saved the same state as the 2-epoch run after epoch 1");
-    let mut resumed = Model::from_checkpoint(&ck, Path::new("mem.ckpt")).unwrap();
-    assert_eq!(bits(&resumed), bits(&first), "checkpoint round trip");
-    let more =
-        train(&mut resumed, tr, va, &cfg(2), Some(state), &mut no_progress, &mut |_, _| Ok(())).unwrap();
-    assert_eq!(more.len(), 1);
-    assert_eq!(more[0].epoch, 2);
-    assert_eq!(more[0].loss.to_bits(), reps[1].loss.to_bits());
-    assert_eq!(more[0].val, reps[1].val);
-    let (a, b) = (bits(&straight), bits(&resumed));
-    assert_eq!(a.len(), b.len());
-    for ((na, ta), (nb, tb)) in a.iter().zip(&b) {
-        assert_eq!(na, nb);
-        assert!(ta == tb, "tensor {na} differs after resuming");
-    }
+    let Resumed { straight, first, mut resumed, states, .. } =
+        check_resume(ModelConfig::default_preset(), &data);
+    let a = bits(&straight);
     // And the 1-epoch model really differs from the 2-epoch one (the check can fail).
     assert_ne!(bits(&first), a);
     // Resuming at the target epoch does nothing.

@@ -49,3 +49,62 @@ pub fn bits(m: &Model) -> Vec<(String, Vec<u32>)> {
 
 /// A progress callback that ignores its argument.
 pub fn no_progress(_: Progress) {}
+
+/// What [`check_resume`] trained.
+pub struct Resumed {
+    /// Two epochs straight through.
+    pub straight: Model,
+    /// One epoch.
+    pub first: Model,
+    /// `first` through checkpoint bytes, then one more epoch.
+    pub resumed: Model,
+    /// The straight run's reports.
+    pub reps: Vec<point2quad::pipeline::train::EpochReport>,
+    /// The straight run's state after each epoch.
+    pub states: Vec<point2quad::nn::checkpoint::TrainState>,
+}
+
+/// Trains `config` (seed 5) two epochs straight, and one epoch + a resume from the
+/// checkpoint's bytes + one more; asserts the saved state, the checkpoint round trip,
+/// the resumed epoch's loss and validation figures and every tensor equal bit for bit.
+pub fn check_resume(config: point2quad::pipeline::model::ModelConfig, data: &[Sample]) -> Resumed {
+    use point2quad::nn::checkpoint::{Checkpoint, TrainState};
+    use point2quad::pipeline::train::train;
+    use std::path::Path;
+    let (tr, va) = (&data[..2], &data[2..]);
+    let mut straight = Model::new(config.clone(), 5).unwrap();
+    let mut states: Vec<TrainState> = Vec::new();
+    let reps = train(&mut straight, tr, va, &train_cfg(2), None, &mut no_progress, &mut |_, st| {
+        states.push(st.clone());
+        Ok(())
+    })
+    .unwrap();
+    assert_eq!(reps.len(), 2);
+    assert!(reps.iter().all(|r| r.loss.is_finite()));
+    let mut first = Model::new(config, 5).unwrap();
+    let mut saved: Option<Vec<u8>> = None;
+    train(&mut first, tr, va, &train_cfg(1), None, &mut no_progress, &mut |m, st| {
+        saved = Some(m.to_checkpoint(Some(st.clone())).to_bytes());
+        Ok(())
+    })
+    .unwrap();
+    let ck = Checkpoint::from_bytes(&saved.expect("checkpoint callback ran"), Path::new("mem.ckpt")).unwrap();
+    let state = ck.train.clone().expect("state saved");
+    assert_eq!(state.epoch, 1);
+    assert_eq!(&state, &states[0], "the 1-epoch run saved the same state as the 2-epoch run after epoch 1");
+    let mut resumed = Model::from_checkpoint(&ck, Path::new("mem.ckpt")).unwrap();
+    assert_eq!(bits(&resumed), bits(&first), "checkpoint round trip");
+    let more = train(&mut resumed, tr, va, &train_cfg(2), Some(state), &mut no_progress, &mut |_, _| Ok(()))
+        .unwrap();
+    assert_eq!(more.len(), 1);
+    assert_eq!(more[0].epoch, 2);
+    assert_eq!(more[0].loss.to_bits(), reps[1].loss.to_bits());
+    assert_eq!(more[0].val, reps[1].val);
+    let (a, b) = (bits(&straight), bits(&resumed));
+    assert_eq!(a.len(), b.len());
+    for ((na, ta), (nb, tb)) in a.iter().zip(&b) {
+        assert_eq!(na, nb);
+        assert!(ta == tb, "tensor {na} differs after resuming");
+    }
+    Resumed { straight, first, resumed, reps, states }
+}

@@ -387,7 +387,8 @@ impl KdTree {
         let mut sp = 0usize;
         let mut node = 0usize;
         let mut off = [0.0f32; 3];
-        let mut first = true;
+        // Small buffers fill unsorted first (see `scan_leaf_knn`); larger ones by insertion.
+        let mut filled = if best.len() <= NET_MAX { 0 } else { best.len() };
         loop {
             while node < n_internal {
                 let nd = self.nodes[node];
@@ -404,12 +405,7 @@ impl KdTree {
                 }
                 node = 2 * node + 1 + right;
             }
-            if first && FIRST_SORT {
-                first = false;
-                self.first_leaf_knn(node - n_internal, &q, best);
-            } else {
-                self.scan_leaf_knn(node - n_internal, &q, best);
-            }
+            self.scan_leaf_knn(node - n_internal, &q, best, &mut filled);
             loop {
                 if sp == 0 {
                     return;
@@ -425,30 +421,9 @@ impl KdTree {
         }
     }
 
-    /// Fills the empty (all [`SENTINEL`]) key buffer `best` from the query's own leaf: sorting the
-    /// leaf's keys costs less than inserting most of them one by one.
-    #[inline(always)]
-    fn first_leaf_knn(&self, leaf: usize, q: &[f32; 3], best: &mut [u64]) {
-        let (s, e) = (leaf * self.slot, (leaf + 1) * self.slot);
-        let mut keys = [SENTINEL; SLOT_MAX];
-        for ((((kk, &x), &y), &z), &i) in
-            keys.iter_mut().zip(&self.xs[s..e]).zip(&self.ys[s..e]).zip(&self.zs[s..e]).zip(&self.idx[s..e])
-        {
-            let d = dist_sq(*q, [x, y, z]);
-            // Padding (NaN) keeps the sentinel.
-            if d <= f32::INFINITY {
-                *kk = key(d, i);
-            }
-        }
-        let keys = &mut keys[..self.slot];
-        keys.sort_unstable();
-        let m = keys.len().min(best.len());
-        best[..m].copy_from_slice(&keys[..m]);
-    }
-
     /// Offers every point of leaf `leaf` to the sorted key buffer `best`.
     #[inline(always)]
-    fn scan_leaf_knn(&self, leaf: usize, q: &[f32; 3], best: &mut [u64]) {
+    fn scan_leaf_knn(&self, leaf: usize, q: &[f32; 3], best: &mut [u64], filled: &mut usize) {
         let (s, e) = (leaf * self.slot, (leaf + 1) * self.slot);
         let last = best.len() - 1;
         // Distances, then the mask of those within the k-th distance, in loops the compiler
@@ -467,7 +442,14 @@ impl KdTree {
             let j = mask.trailing_zeros() as usize;
             mask &= mask - 1;
             let kk = key(ds[j], ids[j]);
-            if kk < best[last] {
+            if *filled < best.len() {
+                // The first k candidates are taken unsorted, then sorted at once.
+                best[*filled] = kk;
+                *filled += 1;
+                if *filled == best.len() {
+                    sort_small(best);
+                }
+            } else if kk < best[last] {
                 insert_sorted(best, kk);
             }
         }
@@ -523,6 +505,54 @@ fn insert_sorted(best: &mut [u64], kk: u64) {
         best[j] = if kk < prev { prev } else if kk < cur { kk } else { cur };
     }
     best[0] = best[0].min(kk);
+}
+
+/// Largest buffer that [`sort_small`] sorts.
+const NET_MAX: usize = 16;
+
+/// Batcher's odd-even merge sorting network on `NET_MAX` inputs, restricted for each `n` to the
+/// comparators within `0..n`: `NETS[n].0[..NETS[n].1]`. The restriction sorts `n` inputs because
+/// padding the input with maximal values makes every dropped comparator a no-op.
+const NETS: [([(u8, u8); 63], usize); NET_MAX + 1] = {
+    let mut nets = [([(0u8, 0u8); 63], 0usize); NET_MAX + 1];
+    let mut n = 0;
+    while n <= NET_MAX {
+        let mut p = 1;
+        while p < NET_MAX {
+            let mut k = p;
+            while k >= 1 {
+                let mut j = k % p;
+                while j + k < NET_MAX {
+                    let mut i = 0;
+                    while i < k && i + j + k < NET_MAX {
+                        let (a, b) = (i + j, i + j + k);
+                        if a / (2 * p) == b / (2 * p) && b < n {
+                            nets[n].0[nets[n].1] = (a as u8, b as u8);
+                            nets[n].1 += 1;
+                        }
+                        i += 1;
+                    }
+                    j += 2 * k;
+                }
+                k /= 2;
+            }
+            p *= 2;
+        }
+        n += 1;
+    }
+    nets
+};
+
+/// Sorts `keys` (at most [`NET_MAX`] of them) with a fixed sequence of branch-free
+/// compare-exchanges.
+#[inline(always)]
+fn sort_small(keys: &mut [u64]) {
+    let (net, len) = &NETS[keys.len()];
+    for &(a, b) in &net[..*len] {
+        let (x, y) = (keys[a as usize], keys[b as usize]);
+        keys[a as usize] = x.min(y);
+        keys[b as usize] = x.max(y);
+    }
 }
 
 /// Partitions `items` for a subtree with `levels` levels of internal nodes, whose nodes (in
@@ -712,6 +742,21 @@ mod tests {
     }
 
     #[test]
+    fn small_sorting_networks_sort() {
+        let mut r = Rng::new(7);
+        for n in 0..=NET_MAX {
+            for _ in 0..200 {
+                // Few distinct values, so that ties are common.
+                let mut v: Vec<u64> = (0..n).map(|_| r.below(6) as u64).collect();
+                let mut want = v.clone();
+                want.sort_unstable();
+                sort_small(&mut v);
+                assert_eq!(v, want, "n = {n}");
+            }
+        }
+    }
+
+    #[test]
     fn empty_and_one_point() {
         let t = KdTree::build(&[]);
         assert!(t.is_empty());
@@ -800,4 +845,3 @@ mod tests {
         }
     }
 }
-const FIRST_SORT: bool = false;

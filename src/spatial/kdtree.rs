@@ -107,6 +107,28 @@ fn box_dist_sq(off: [f32; 3]) -> f32 {
     off[0] * off[0] + off[1] * off[1] + off[2] * off[2]
 }
 
+/// `UNIT[d]` is 1 in lane `d` and 0 elsewhere.
+const UNIT: [[f32; 3]; 4] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0; 3]];
+
+/// The per-axis distances to the far child of a node splitting axis `d`, whose split plane is at
+/// distance `a` from the query, given `off` for the node: `off` with lane `d` raised to `a` (the
+/// far cell lies beyond the plane and within the node's cell, so either bound holds). Lanes other
+/// than `d` see `a * 0`, which is 0 or (for `a = inf`) NaN, and a NaN never wins the `>`.
+/// Arithmetic instead of an indexed store: a store to a computed index followed by whole-array
+/// loads would stall on store forwarding, on the search's hottest path.
+#[inline(always)]
+fn with_axis(off: [f32; 3], d: usize, a: f32) -> [f32; 3] {
+    let u = UNIT[d & 3];
+    std::array::from_fn(|i| {
+        let v = a * u[i];
+        if v > off[i] {
+            v
+        } else {
+            off[i]
+        }
+    })
+}
+
 /// An internal node: points of the left child have `p[dim] <= val`, of the right `p[dim] >= val`.
 #[derive(Clone, Copy, Debug, Default)]
 struct Node {
@@ -280,8 +302,13 @@ impl KdTree {
         let mut sorted = vec![0u64; nq * k];
         par::for_each_chunk_mut(&mut sorted, QUERY_BLOCK * k, |b, rows| {
             let mut stack = [Pending::default(); MAX_DEPTH];
-            for (r, best) in rows.chunks_exact_mut(k).enumerate() {
-                let q = queries[order[b * QUERY_BLOCK + r] as usize];
+            // Gathered first: these scattered loads overlap, where one per search would stall it.
+            let block = &order[b * QUERY_BLOCK..(b * QUERY_BLOCK + rows.len() / k)];
+            let mut qs = [[0.0f32; 3]; QUERY_BLOCK];
+            for (q, &i) in qs.iter_mut().zip(block) {
+                *q = queries[i as usize];
+            }
+            for (best, &q) in rows.chunks_exact_mut(k).zip(&qs) {
                 if q.iter().all(|c| c.is_finite()) {
                     self.knn_into(q, best, &mut stack);
                 } else {
@@ -395,8 +422,7 @@ impl KdTree {
                 let d = nd.dim as usize;
                 let diff = q[d] - nd.val;
                 let right = usize::from(diff >= 0.0);
-                let mut far_off = off;
-                far_off[d] = diff.abs();
+                let far_off = with_axis(off, d, diff.abs());
                 let rd = box_dist_sq(far_off);
                 // `rd <= k-th distance`, in key space (a sentinel lets everything through).
                 if ((rd.to_bits() as u64) << 32) <= best[last] {
@@ -468,8 +494,7 @@ impl KdTree {
                 let d = nd.dim as usize;
                 let diff = q[d] - nd.val;
                 let right = usize::from(diff >= 0.0);
-                let mut far_off = off;
-                far_off[d] = diff.abs();
+                let far_off = with_axis(off, d, diff.abs());
                 let rd = box_dist_sq(far_off);
                 if rd <= radius_sq {
                     stack[sp] = Pending { off: far_off, rd, node: (2 * node + 2 - right) as u32 };

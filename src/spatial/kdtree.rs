@@ -481,6 +481,27 @@ impl KdTree {
         }
     }
 
+    /// Pushes the points of leaf `leaf` within `radius_sq` of `q` to `out`.
+    #[inline(always)]
+    fn scan_leaf_radius(&self, leaf: usize, q: &[f32; 3], radius_sq: f32, out: &mut Vec<Neighbor>) {
+        let (s, e) = (leaf * self.slot, (leaf + 1) * self.slot);
+        let mut ds = [f32::NAN; SLOT_MAX];
+        for (((d, &x), &y), &z) in ds.iter_mut().zip(&self.xs[s..e]).zip(&self.ys[s..e]).zip(&self.zs[s..e]) {
+            *d = dist_sq(*q, [x, y, z]);
+        }
+        // Padding is NaN: its distance never compares `<=`.
+        let mut mask = 0u32;
+        for (&d, &bit) in ds.iter().zip(&BITS) {
+            mask |= if d <= radius_sq { bit } else { 0 };
+        }
+        let ids = &self.idx[s..e];
+        while mask != 0 {
+            let j = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            out.push(Neighbor { index: ids[j], dist_sq: ds[j] });
+        }
+    }
+
     /// Depth-first radius search into `out` (unsorted), traversed and pruned like
     /// [`KdTree::knn_into`] with the fixed bound `radius_sq`.
     fn radius_into(&self, q: [f32; 3], radius_sq: f32, out: &mut Vec<Neighbor>, stack: &mut SearchStack) {
@@ -502,14 +523,7 @@ impl KdTree {
                 }
                 node = 2 * node + 1 + right;
             }
-            let leaf = node - n_internal;
-            for p in leaf * self.slot..(leaf + 1) * self.slot {
-                // Padding is NaN: its distance never compares `<=`.
-                let d = dist_sq(q, [self.xs[p], self.ys[p], self.zs[p]]);
-                if d <= radius_sq {
-                    out.push(Neighbor { index: self.idx[p], dist_sq: d });
-                }
-            }
+            self.scan_leaf_radius(node - n_internal, &q, radius_sq, out);
             if sp == 0 {
                 return;
             }

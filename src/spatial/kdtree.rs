@@ -1,8 +1,14 @@
 //! Exact k-nearest-neighbour and radius search over 3-D `f32` points.
 //!
 //! A balanced kd-tree built once over a slice: it owns a permuted copy of the points (structure of
-//! arrays), the permutation back to the caller's indices, an implicit node array in pre-order and
-//! leaves as contiguous ranges ("buckets") of at most [`BUCKET`] points.
+//! arrays), the permutation back to the caller's indices, an implicit breadth-first node array and
+//! leaves ("buckets") of at most [`BUCKET`] points, each in a fixed slot padded with NaN points.
+//!
+//! Searches are depth-first without recursion (an explicit stack of pending far subtrees), near
+//! child first, pruned by the distance to a subtree's cell kept per axis (the incremental "rd" of
+//! Arya & Mount). A leaf is scanned by computing all its distances and a mask of those within the
+//! current k-th distance in vector registers; only the few candidates are then inserted into a
+//! sorted buffer, without branches on their position.
 //!
 //! Results are exact and deterministic: squared distances are computed by [`dist_sq`] (always the
 //! same `f32` expression, no fused multiply-add), and among equal distances the smaller original
@@ -20,8 +26,8 @@ use crate::par;
 /// Most points in one leaf bucket. Leaves hold between about `BUCKET / 2` and `BUCKET` points.
 pub const BUCKET: usize = 32;
 
-/// Leaf slots are padded to a multiple of this many points, so that a leaf scan is whole
-/// fixed-width chunks: distances computed in vector registers, then one comparison mask per chunk.
+/// Leaf slots are padded to a multiple of this many points, so that the distance loop of a leaf
+/// scan is whole vector registers.
 const LANES: usize = 4;
 
 /// Index used in [`KnnTable`] rows of queries that have no neighbours (non-finite queries).
@@ -33,7 +39,7 @@ const PAR_BUILD_MIN: usize = 16 * 1024;
 /// Points sampled to estimate a node's extent when choosing its split axis.
 const EXTENT_SAMPLE: usize = 256;
 
-/// Queries per parallel task in the batch functions.
+/// Queries per parallel task in the batch functions (and the most a kNN task gathers at once).
 const QUERY_BLOCK: usize = 512;
 
 /// Padding of a kNN key buffer before it fills: `key(inf, u32::MAX)`, above every real key (real
@@ -46,8 +52,9 @@ const STACK_K: usize = 64;
 /// Largest leaf slot: [`BUCKET`] rounded up to a multiple of [`LANES`].
 const SLOT_MAX: usize = BUCKET.div_ceil(LANES) * LANES;
 
-/// `BITS[j] = 1 << j`, to build candidate masks in vector registers.
+/// `BITS[j] = 1 << j`, to build candidate masks in vector registers (a `u32` mask per leaf).
 const BITS: [u32; SLOT_MAX] = {
+    assert!(SLOT_MAX <= 32, "leaf masks are u32");
     let mut b = [0u32; SLOT_MAX];
     let mut j = 0;
     while j < SLOT_MAX {
@@ -57,8 +64,8 @@ const BITS: [u32; SLOT_MAX] = {
     b
 };
 
-/// Most levels of internal nodes: leaves hold at most `BUCKET >= 2` points of at most `u32::MAX`,
-/// so `depth <= 31`. A search keeps at most one pending subtree per level.
+/// Most levels of internal nodes: at most `u32::MAX` points and leaves of at least one point make
+/// `depth <= 32`. A search keeps at most one pending subtree per level, so this bounds its stack.
 const MAX_DEPTH: usize = 32;
 
 /// A search result packed so that one integer comparison orders by `(dist_sq, index)`: squared
@@ -275,6 +282,17 @@ impl KdTree {
     /// All points with `dist_sq <= radius_sq`, into `out` (cleared first), sorted by
     /// `(dist_sq, index)`. A NaN or negative `radius_sq`, or a non-finite query, gives nothing.
     pub fn within_radius(&self, query: [f32; 3], radius_sq: f32, out: &mut Vec<Neighbor>) {
+        self.within_radius_with(query, radius_sq, out, &mut [Pending::default(); MAX_DEPTH]);
+    }
+
+    /// [`KdTree::within_radius`] with the search stack given (reused across a batch).
+    fn within_radius_with(
+        &self,
+        query: [f32; 3],
+        radius_sq: f32,
+        out: &mut Vec<Neighbor>,
+        stack: &mut SearchStack,
+    ) {
         out.clear();
         if self.n_indexed == 0
             || radius_sq.is_nan()
@@ -283,7 +301,7 @@ impl KdTree {
         {
             return;
         }
-        self.radius_into(query, radius_sq, out, &mut [Pending::default(); MAX_DEPTH]);
+        self.radius_into(query, radius_sq, out, stack);
         out.sort_unstable_by(|a, b| a.dist_sq.total_cmp(&b.dist_sq).then(a.index.cmp(&b.index)));
     }
 
@@ -379,8 +397,9 @@ impl KdTree {
             let mut ii = Vec::new();
             let mut dd = Vec::new();
             let mut buf = Vec::new();
+            let mut stack = [Pending::default(); MAX_DEPTH];
             for q in qs {
-                self.within_radius(*q, radius_sq, &mut buf);
+                self.within_radius_with(*q, radius_sq, &mut buf, &mut stack);
                 counts.push(buf.len());
                 ii.extend(buf.iter().map(|nb| nb.index));
                 dd.extend(buf.iter().map(|nb| nb.dist_sq));
@@ -541,7 +560,13 @@ impl KdTree {
 fn insert_sorted(best: &mut [u64], kk: u64) {
     for j in (1..best.len()).rev() {
         let (prev, cur) = (best[j - 1], best[j]);
-        best[j] = if kk < prev { prev } else if kk < cur { kk } else { cur };
+        best[j] = if kk < prev {
+            prev
+        } else if kk < cur {
+            kk
+        } else {
+            cur
+        };
     }
     best[0] = best[0].min(kk);
 }

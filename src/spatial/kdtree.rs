@@ -1,8 +1,14 @@
 //! Exact k-nearest-neighbour and radius search over 3-D `f32` points.
 //!
 //! A balanced kd-tree built once over a slice: it owns a permuted copy of the points (structure of
-//! arrays), the permutation back to the caller's indices, an implicit node array in pre-order and
-//! leaves as contiguous ranges ("buckets") of at most [`BUCKET`] points.
+//! arrays), the permutation back to the caller's indices, an implicit breadth-first node array and
+//! leaves ("buckets") of at most [`BUCKET`] points, each in a fixed slot padded with NaN points.
+//!
+//! Searches are depth-first without recursion (an explicit stack of pending far subtrees), near
+//! child first, pruned by the distance to a subtree's cell kept per axis (the incremental "rd" of
+//! Arya & Mount). A leaf is scanned by computing all its distances and a mask of those within the
+//! current k-th distance in vector registers; only the few candidates are then inserted into a
+//! sorted buffer, without branches on their position.
 //!
 //! Results are exact and deterministic: squared distances are computed by [`dist_sq`] (always the
 //! same `f32` expression, no fused multiply-add), and among equal distances the smaller original
@@ -20,6 +26,10 @@ use crate::par;
 /// Most points in one leaf bucket. Leaves hold between about `BUCKET / 2` and `BUCKET` points.
 pub const BUCKET: usize = 32;
 
+/// Leaf slots are padded to a multiple of this many points, so that the distance loop of a leaf
+/// scan is whole vector registers.
+const LANES: usize = 4;
+
 /// Index used in [`KnnTable`] rows of queries that have no neighbours (non-finite queries).
 pub const NO_NEIGHBOR: u32 = u32::MAX;
 
@@ -29,7 +39,7 @@ const PAR_BUILD_MIN: usize = 16 * 1024;
 /// Points sampled to estimate a node's extent when choosing its split axis.
 const EXTENT_SAMPLE: usize = 256;
 
-/// Queries per parallel task in the batch functions.
+/// Queries per parallel task in the batch functions (and the most a kNN task gathers at once).
 const QUERY_BLOCK: usize = 512;
 
 /// Padding of a kNN key buffer before it fills: `key(inf, u32::MAX)`, above every real key (real
@@ -38,6 +48,25 @@ const SENTINEL: u64 = 0x7F80_0000_FFFF_FFFF;
 
 /// Largest `k` whose search buffer lives on the stack in [`KdTree::knn`].
 const STACK_K: usize = 64;
+
+/// Largest leaf slot: [`BUCKET`] rounded up to a multiple of [`LANES`].
+const SLOT_MAX: usize = BUCKET.div_ceil(LANES) * LANES;
+
+/// `BITS[j] = 1 << j`, to build candidate masks in vector registers (a `u32` mask per leaf).
+const BITS: [u32; SLOT_MAX] = {
+    assert!(SLOT_MAX <= 32, "leaf masks are u32");
+    let mut b = [0u32; SLOT_MAX];
+    let mut j = 0;
+    while j < SLOT_MAX {
+        b[j] = 1 << j;
+        j += 1;
+    }
+    b
+};
+
+/// Most levels of internal nodes: at most `u32::MAX` points and leaves of at least one point make
+/// `depth <= 32`. A search keeps at most one pending subtree per level, so this bounds its stack.
+const MAX_DEPTH: usize = 32;
 
 /// A search result packed so that one integer comparison orders by `(dist_sq, index)`: squared
 /// distances are never negative (nor -0 or NaN: finite points and queries only), and the bit
@@ -77,6 +106,36 @@ pub fn dist_sq(a: [f32; 3], b: [f32; 3]) -> f32 {
     dx * dx + dy * dy + dz * dz
 }
 
+/// Lower bound on [`dist_sq`] from the query to any point of a box, from the per-axis distances
+/// `off` from the query to the box: rounding is monotonic, so this never exceeds the distance to
+/// a point in the box, and pruning on it is exact.
+#[inline(always)]
+fn box_dist_sq(off: [f32; 3]) -> f32 {
+    off[0] * off[0] + off[1] * off[1] + off[2] * off[2]
+}
+
+/// `UNIT[d]` is 1 in lane `d` and 0 elsewhere.
+const UNIT: [[f32; 3]; 4] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0; 3]];
+
+/// The per-axis distances to the far child of a node splitting axis `d`, whose split plane is at
+/// distance `a` from the query, given `off` for the node: `off` with lane `d` raised to `a` (the
+/// far cell lies beyond the plane and within the node's cell, so either bound holds). Lanes other
+/// than `d` see `a * 0`, which is 0 or (for `a = inf`) NaN, and a NaN never wins the `>`.
+/// Arithmetic instead of an indexed store: a store to a computed index followed by whole-array
+/// loads would stall on store forwarding, on the search's hottest path.
+#[inline(always)]
+fn with_axis(off: [f32; 3], d: usize, a: f32) -> [f32; 3] {
+    let u = UNIT[d & 3];
+    std::array::from_fn(|i| {
+        let v = a * u[i];
+        if v > off[i] {
+            v
+        } else {
+            off[i]
+        }
+    })
+}
+
 /// An internal node: points of the left child have `p[dim] <= val`, of the right `p[dim] >= val`.
 #[derive(Clone, Copy, Debug, Default)]
 struct Node {
@@ -84,25 +143,41 @@ struct Node {
     dim: u32,
 }
 
+/// A subtree a search still has to visit: its node, the per-axis distances from the query to its
+/// cell, and their [`box_dist_sq`].
+#[derive(Clone, Copy, Default)]
+struct Pending {
+    off: [f32; 3],
+    rd: f32,
+    node: u32,
+}
+
+/// The explicit stack of a depth-first search (no recursion): it holds at most one pending
+/// subtree per level, with levels increasing from bottom to top.
+type SearchStack = [Pending; MAX_DEPTH];
+
 /// A kd-tree over 3-D `f32` points for exact kNN and radius queries.
 ///
-/// Layout: a complete binary tree of `depth` levels of internal nodes stored in pre-order (the
-/// left child of node `i` at level `l` is `i + 1`, the right one `i + 2^(depth - l - 1)`), whose
-/// `2^depth` leaves are consecutive ranges of the permuted point arrays.
+/// Layout: a complete binary tree of `depth` levels of internal nodes stored breadth-first (the
+/// children of node `i` are `2i + 1` and `2i + 2`, node `2^depth - 1 + j` is leaf `j`); leaf `j`
+/// owns the fixed slot `j * slot .. (j + 1) * slot` of the permuted point arrays, its points first
+/// and then padding whose coordinates are NaN (so every distance comparison on them is false).
 #[derive(Clone, Debug)]
 pub struct KdTree {
     /// Number of points given to `build` (finite or not).
     n_input: usize,
-    /// Permuted finite points, one array per coordinate; leaf `j` is `leaf_start[j]..leaf_start[j+1]`.
+    /// Number of finite points, the ones stored and returned.
+    n_indexed: usize,
+    /// Permuted finite points and padding, one array per coordinate, `slot << depth` entries.
     xs: Vec<f32>,
     ys: Vec<f32>,
     zs: Vec<f32>,
-    /// `idx[p]` is the caller's index of permuted point `p`.
+    /// `idx[p]` is the caller's index of permuted point `p` ([`NO_NEIGHBOR`] for padding).
     idx: Vec<u32>,
-    /// Internal nodes in pre-order, `2^depth - 1` of them.
+    /// Internal nodes breadth-first, `2^depth - 1` of them.
     nodes: Vec<Node>,
-    /// Leaf boundaries, `2^depth + 1` entries, non-decreasing, last = number of finite points.
-    leaf_start: Vec<u32>,
+    /// Points per leaf slot: the largest leaf rounded up to a multiple of [`LANES`].
+    slot: usize,
     /// Levels of internal nodes (0: the whole tree is one leaf).
     depth: u32,
 }
@@ -136,21 +211,26 @@ impl KdTree {
         while n.div_ceil(1 << depth) > BUCKET {
             depth += 1;
         }
-        let mut nodes = vec![Node::default(); (1usize << depth) - 1];
-        build_rec(&mut items, &mut nodes, depth);
+        let mut pre_order = vec![Node::default(); (1usize << depth) - 1];
+        build_rec(&mut items, &mut pre_order, depth);
+        let mut nodes = vec![Node::default(); pre_order.len()];
+        breadth_first(&pre_order, depth, 0, &mut nodes);
         let mut leaf_start = Vec::with_capacity((1usize << depth) + 1);
         leaf_bounds(0, n, depth, &mut leaf_start);
-        leaf_start.push(n as u32);
-        KdTree {
-            n_input: points.len(),
-            xs: items.iter().map(|it| it.p[0]).collect(),
-            ys: items.iter().map(|it| it.p[1]).collect(),
-            zs: items.iter().map(|it| it.p[2]).collect(),
-            idx: items.iter().map(|it| it.i).collect(),
-            nodes,
-            leaf_start,
-            depth,
+        leaf_start.push(n);
+        let slot = n.div_ceil(1 << depth).div_ceil(LANES) * LANES;
+        let total = slot << depth;
+        let (mut xs, mut ys, mut zs) = (vec![f32::NAN; total], vec![f32::NAN; total], vec![f32::NAN; total]);
+        let mut idx = vec![NO_NEIGHBOR; total];
+        for (leaf, w) in leaf_start.windows(2).enumerate() {
+            for (p, it) in (leaf * slot..).zip(&items[w[0]..w[1]]) {
+                xs[p] = it.p[0];
+                ys[p] = it.p[1];
+                zs[p] = it.p[2];
+                idx[p] = it.i;
+            }
         }
+        KdTree { n_input: points.len(), n_indexed: n, xs, ys, zs, idx, nodes, slot, depth }
     }
 
     /// Number of points given to [`KdTree::build`], including any non-finite ones left out.
@@ -165,77 +245,63 @@ impl KdTree {
 
     /// Number of points that queries can return (the finite ones; equals `len()` for clean input).
     pub fn num_indexed(&self) -> usize {
-        self.idx.len()
+        self.n_indexed
     }
 
     /// The `k` nearest points to `query`, into `out` (cleared first): `min(k, num_indexed())`
     /// results sorted by `(dist_sq, index)`. `k = 0` or a non-finite query gives no results.
     pub fn knn(&self, query: [f32; 3], k: usize, out: &mut Vec<Neighbor>) {
         out.clear();
-        let k = k.min(self.idx.len());
+        let k = k.min(self.n_indexed);
         if k == 0 || !query.iter().all(|c| c.is_finite()) {
             return;
         }
+        let mut stack = [Pending::default(); MAX_DEPTH];
         if k <= STACK_K {
             let mut best = [SENTINEL; STACK_K];
-            self.knn_into(query, &mut best[..k]);
+            self.knn_into(query, &mut best[..k], &mut stack);
             out.extend(best[..k].iter().map(|&b| unkey(b)));
         } else {
             let mut best = vec![SENTINEL; k];
-            self.knn_into(query, &mut best);
+            self.knn_into(query, &mut best, &mut stack);
             out.extend(best.iter().map(|&b| unkey(b)));
         }
-    }
-
-    /// Fills `best` (its length is k, `1 <= k <= num_indexed()`, finite query) with the keys of
-    /// the k nearest, sorted.
-    #[inline]
-    fn knn_into(&self, query: [f32; 3], best: &mut [u64]) {
-        best.fill(SENTINEL);
-        let mut off = [0.0f32; 3];
-        self.knn_rec(0, 0, 0, &query, &mut off, best);
-    }
-
-    /// The leaf whose range `query` descends to (the first one a search scans).
-    fn leaf_of(&self, q: [f32; 3]) -> usize {
-        let (mut node, mut leaf) = (0usize, 0usize);
-        for level in 0..self.depth {
-            let nd = self.nodes[node];
-            let half = 1usize << (self.depth - level - 1);
-            if q[nd.dim as usize] < nd.val {
-                node += 1;
-            } else {
-                node += half;
-                leaf += half;
-            }
-        }
-        leaf
     }
 
     /// The nearest point to `query` (smallest index among equally near ones), or `None` for an
     /// empty tree or a non-finite query.
     pub fn nearest(&self, query: [f32; 3]) -> Option<Neighbor> {
-        if self.idx.is_empty() || !query.iter().all(|c| c.is_finite()) {
+        if self.n_indexed == 0 || !query.iter().all(|c| c.is_finite()) {
             return None;
         }
         let mut best = [SENTINEL];
-        self.knn_into(query, &mut best);
+        self.knn_into(query, &mut best, &mut [Pending::default(); MAX_DEPTH]);
         Some(unkey(best[0]))
     }
 
     /// All points with `dist_sq <= radius_sq`, into `out` (cleared first), sorted by
     /// `(dist_sq, index)`. A NaN or negative `radius_sq`, or a non-finite query, gives nothing.
     pub fn within_radius(&self, query: [f32; 3], radius_sq: f32, out: &mut Vec<Neighbor>) {
+        self.within_radius_with(query, radius_sq, out, &mut [Pending::default(); MAX_DEPTH]);
+    }
+
+    /// [`KdTree::within_radius`] with the search stack given (reused across a batch).
+    fn within_radius_with(
+        &self,
+        query: [f32; 3],
+        radius_sq: f32,
+        out: &mut Vec<Neighbor>,
+        stack: &mut SearchStack,
+    ) {
         out.clear();
-        if self.idx.is_empty()
+        if self.n_indexed == 0
             || radius_sq.is_nan()
             || radius_sq < 0.0
             || !query.iter().all(|c| c.is_finite())
         {
             return;
         }
-        let mut off = [0.0f32; 3];
-        self.radius_rec(0, 0, 0, &query, &mut off, radius_sq, out);
+        self.radius_into(query, radius_sq, out, stack);
         out.sort_unstable_by(|a, b| a.dist_sq.total_cmp(&b.dist_sq).then(a.index.cmp(&b.index)));
     }
 
@@ -243,7 +309,7 @@ impl KdTree {
     /// `k = min(k, num_indexed())` columns; rows of non-finite queries are filled with
     /// [`NO_NEIGHBOR`] and `f32::INFINITY`.
     pub fn knn_batch(&self, queries: &[[f32; 3]], k: usize) -> KnnTable {
-        let k = k.min(self.idx.len());
+        let k = k.min(self.n_indexed);
         let nq = queries.len();
         if k == 0 {
             return KnnTable { k, n_queries: nq, indices: Vec::new(), dist_sq: Vec::new() };
@@ -253,10 +319,16 @@ impl KdTree {
         let order = self.leaf_order(queries);
         let mut sorted = vec![0u64; nq * k];
         par::for_each_chunk_mut(&mut sorted, QUERY_BLOCK * k, |b, rows| {
-            for (r, best) in rows.chunks_exact_mut(k).enumerate() {
-                let q = queries[order[b * QUERY_BLOCK + r] as usize];
+            let mut stack = [Pending::default(); MAX_DEPTH];
+            // Gathered first: these scattered loads overlap, where one per search would stall it.
+            let block = &order[b * QUERY_BLOCK..(b * QUERY_BLOCK + rows.len() / k)];
+            let mut qs = [[0.0f32; 3]; QUERY_BLOCK];
+            for (q, &i) in qs.iter_mut().zip(block) {
+                *q = queries[i as usize];
+            }
+            for (best, &q) in rows.chunks_exact_mut(k).zip(&qs) {
                 if q.iter().all(|c| c.is_finite()) {
-                    self.knn_into(q, best);
+                    self.knn_into(q, best, &mut stack);
                 } else {
                     best.fill(key(f32::INFINITY, NO_NEIGHBOR));
                 }
@@ -280,11 +352,21 @@ impl KdTree {
             for (r, row) in rows.chunks_exact_mut(k).enumerate() {
                 let src = rank[b * QUERY_BLOCK + r] as usize * k;
                 for (o, nb) in row.iter_mut().zip(&sorted[src..src + k]) {
-                    *o = f32::from_bits((*nb >> 32) as u32);
+                    *o = kth_dist(*nb);
                 }
             }
         });
         KnnTable { k, n_queries: nq, indices, dist_sq: dists }
+    }
+
+    /// The leaf whose slot `q` descends to (the first one a search scans).
+    fn leaf_of(&self, q: [f32; 3]) -> usize {
+        let mut node = 0usize;
+        while node < self.nodes.len() {
+            let nd = self.nodes[node];
+            node = 2 * node + 1 + usize::from(q[nd.dim as usize] >= nd.val);
+        }
+        node - self.nodes.len()
     }
 
     /// Query indices sorted by the leaf each descends to (a stable counting sort).
@@ -315,8 +397,9 @@ impl KdTree {
             let mut ii = Vec::new();
             let mut dd = Vec::new();
             let mut buf = Vec::new();
+            let mut stack = [Pending::default(); MAX_DEPTH];
             for q in qs {
-                self.within_radius(*q, radius_sq, &mut buf);
+                self.within_radius_with(*q, radius_sq, &mut buf, &mut stack);
                 counts.push(buf.len());
                 ii.extend(buf.iter().map(|nb| nb.index));
                 dd.extend(buf.iter().map(|nb| nb.dist_sq));
@@ -338,112 +421,201 @@ impl KdTree {
         RadiusTable { offsets, indices, dist_sq: dists }
     }
 
-    /// Depth-first kNN search into `best` (sorted, length k, padded with [`SENTINEL`]s, which
-    /// every real point beats). `off[d]` is the distance from the query to the node's box along
-    /// axis `d`; `(off0² + off1²) + off2²` rounds no higher than [`dist_sq`] of any point in the
-    /// box (rounding is monotonic), so pruning when it exceeds the k-th distance is exact; ties
-    /// with the k-th distance are searched because a smaller index may win them.
-    fn knn_rec(
-        &self,
-        node: usize,
-        level: u32,
-        leaf: usize,
-        q: &[f32; 3],
-        off: &mut [f32; 3],
-        best: &mut [u64],
-    ) {
-        if level == self.depth {
-            self.scan_leaf_knn(leaf, q, best);
-            return;
+    /// Depth-first kNN search into `best` (length k, `1 <= k <= num_indexed()`, finite query):
+    /// on return it holds the keys of the k nearest, sorted. It descends to the query's leaf first,
+    /// pushing each far child whose cell may still hold a nearer point, then pops them; a subtree
+    /// is skipped when its [`box_dist_sq`] exceeds the k-th distance found so far (ties with the
+    /// k-th distance are searched because a smaller index may win them).
+    fn knn_into(&self, q: [f32; 3], best: &mut [u64], stack: &mut SearchStack) {
+        best.fill(SENTINEL);
+        let last = best.len() - 1;
+        let n_internal = self.nodes.len();
+        let mut sp = 0usize;
+        let mut node = 0usize;
+        let mut off = [0.0f32; 3];
+        // Small buffers fill unsorted first (see `scan_leaf_knn`); larger ones by insertion.
+        let mut filled = if best.len() <= NET_MAX { 0 } else { best.len() };
+        loop {
+            while node < n_internal {
+                let nd = self.nodes[node];
+                let d = nd.dim as usize;
+                let diff = q[d] - nd.val;
+                let right = usize::from(diff >= 0.0);
+                let far_off = with_axis(off, d, diff.abs());
+                let rd = box_dist_sq(far_off);
+                // `rd <= k-th distance`, in key space (a sentinel lets everything through).
+                if ((rd.to_bits() as u64) << 32) <= best[last] {
+                    stack[sp] = Pending { off: far_off, rd, node: (2 * node + 2 - right) as u32 };
+                    sp += 1;
+                }
+                node = 2 * node + 1 + right;
+            }
+            self.scan_leaf_knn(node - n_internal, &q, best, &mut filled);
+            loop {
+                if sp == 0 {
+                    return;
+                }
+                sp -= 1;
+                let p = stack[sp];
+                if ((p.rd.to_bits() as u64) << 32) <= best[last] {
+                    node = p.node as usize;
+                    off = p.off;
+                    break;
+                }
+            }
         }
-        let nd = self.nodes[node];
-        let d = nd.dim as usize;
-        let diff = q[d] - nd.val;
-        let half = 1usize << (self.depth - level - 1);
-        let (near, near_leaf, far, far_leaf) = if diff < 0.0 {
-            (node + 1, leaf, node + half, leaf + half)
-        } else {
-            (node + half, leaf + half, node + 1, leaf)
-        };
-        self.knn_rec(near, level + 1, near_leaf, q, off, best);
-        let old = off[d];
-        off[d] = diff.abs();
-        let rd = off[0] * off[0] + off[1] * off[1] + off[2] * off[2];
-        // `rd <= k-th distance`, in key space (a sentinel lets everything through).
-        if ((rd.to_bits() as u64) << 32) <= best[best.len() - 1] {
-            self.knn_rec(far, level + 1, far_leaf, q, off, best);
-        }
-        off[d] = old;
     }
 
+    /// Offers every point of leaf `leaf` to the sorted key buffer `best`.
     #[inline(always)]
-    fn scan_leaf_knn(&self, leaf: usize, q: &[f32; 3], best: &mut [u64]) {
-        let (s, e) = (self.leaf_start[leaf] as usize, self.leaf_start[leaf + 1] as usize);
-        let (xs, ys, zs, ids) = (&self.xs[s..e], &self.ys[s..e], &self.zs[s..e], &self.idx[s..e]);
-        // Distances first, in a loop the compiler vectorises; the rare insertions after.
-        let mut ds = [0.0f32; BUCKET];
-        for (((d, &x), &y), &z) in ds.iter_mut().zip(xs).zip(ys).zip(zs) {
+    fn scan_leaf_knn(&self, leaf: usize, q: &[f32; 3], best: &mut [u64], filled: &mut usize) {
+        let (s, e) = (leaf * self.slot, (leaf + 1) * self.slot);
+        let last = best.len() - 1;
+        // Distances, then the mask of those within the k-th distance, in loops the compiler
+        // vectorises; then only the (few) candidates are looked at one by one.
+        let mut ds = [f32::NAN; SLOT_MAX];
+        for (((d, &x), &y), &z) in ds.iter_mut().zip(&self.xs[s..e]).zip(&self.ys[s..e]).zip(&self.zs[s..e]) {
             *d = dist_sq(*q, [x, y, z]);
         }
-        let last = best.len() - 1;
-        let mut worst = best[last];
-        let mut worst_d = kth_dist(worst);
-        for (&d, &i) in ds.iter().zip(ids) {
-            if d <= worst_d {
-                let kk = key(d, i);
-                if kk < worst {
-                    let mut pos = last;
-                    while pos > 0 && kk < best[pos - 1] {
-                        best[pos] = best[pos - 1];
-                        pos -= 1;
-                    }
-                    best[pos] = kk;
-                    worst = best[last];
-                    worst_d = kth_dist(worst);
+        let worst_d = kth_dist(best[last]);
+        let mut mask = 0u32;
+        for (&d, &bit) in ds.iter().zip(&BITS) {
+            mask |= if d <= worst_d { bit } else { 0 };
+        }
+        let ids = &self.idx[s..e];
+        while mask != 0 {
+            let j = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            let kk = key(ds[j], ids[j]);
+            if *filled < best.len() {
+                // The first k candidates are taken unsorted, then sorted at once.
+                best[*filled] = kk;
+                *filled += 1;
+                if *filled == best.len() {
+                    sort_small(best);
                 }
+            } else if kk < best[last] {
+                insert_sorted(best, kk);
             }
         }
     }
 
-    /// Depth-first radius search, pruned like [`KdTree::knn_rec`]; results are unsorted.
-    #[allow(clippy::too_many_arguments)]
-    fn radius_rec(
-        &self,
-        node: usize,
-        level: u32,
-        leaf: usize,
-        q: &[f32; 3],
-        off: &mut [f32; 3],
-        radius_sq: f32,
-        out: &mut Vec<Neighbor>,
-    ) {
-        if level == self.depth {
-            let (s, e) = (self.leaf_start[leaf] as usize, self.leaf_start[leaf + 1] as usize);
-            for p in s..e {
-                let d = dist_sq(*q, [self.xs[p], self.ys[p], self.zs[p]]);
-                if d <= radius_sq {
-                    out.push(Neighbor { index: self.idx[p], dist_sq: d });
+    /// Pushes the points of leaf `leaf` within `radius_sq` of `q` to `out`.
+    #[inline(always)]
+    fn scan_leaf_radius(&self, leaf: usize, q: &[f32; 3], radius_sq: f32, out: &mut Vec<Neighbor>) {
+        let (s, e) = (leaf * self.slot, (leaf + 1) * self.slot);
+        let mut ds = [f32::NAN; SLOT_MAX];
+        for (((d, &x), &y), &z) in ds.iter_mut().zip(&self.xs[s..e]).zip(&self.ys[s..e]).zip(&self.zs[s..e]) {
+            *d = dist_sq(*q, [x, y, z]);
+        }
+        // Padding is NaN: its distance never compares `<=`.
+        let mut mask = 0u32;
+        for (&d, &bit) in ds.iter().zip(&BITS) {
+            mask |= if d <= radius_sq { bit } else { 0 };
+        }
+        let ids = &self.idx[s..e];
+        while mask != 0 {
+            let j = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            out.push(Neighbor { index: ids[j], dist_sq: ds[j] });
+        }
+    }
+
+    /// Depth-first radius search into `out` (unsorted), traversed and pruned like
+    /// [`KdTree::knn_into`] with the fixed bound `radius_sq`.
+    fn radius_into(&self, q: [f32; 3], radius_sq: f32, out: &mut Vec<Neighbor>, stack: &mut SearchStack) {
+        let n_internal = self.nodes.len();
+        let mut sp = 0usize;
+        let mut node = 0usize;
+        let mut off = [0.0f32; 3];
+        loop {
+            while node < n_internal {
+                let nd = self.nodes[node];
+                let d = nd.dim as usize;
+                let diff = q[d] - nd.val;
+                let right = usize::from(diff >= 0.0);
+                let far_off = with_axis(off, d, diff.abs());
+                let rd = box_dist_sq(far_off);
+                if rd <= radius_sq {
+                    stack[sp] = Pending { off: far_off, rd, node: (2 * node + 2 - right) as u32 };
+                    sp += 1;
                 }
+                node = 2 * node + 1 + right;
             }
-            return;
+            self.scan_leaf_radius(node - n_internal, &q, radius_sq, out);
+            if sp == 0 {
+                return;
+            }
+            sp -= 1;
+            node = stack[sp].node as usize;
+            off = stack[sp].off;
         }
-        let nd = self.nodes[node];
-        let d = nd.dim as usize;
-        let diff = q[d] - nd.val;
-        let half = 1usize << (self.depth - level - 1);
-        let (near, near_leaf, far, far_leaf) = if diff < 0.0 {
-            (node + 1, leaf, node + half, leaf + half)
+    }
+}
+
+/// Inserts `kk` into the sorted `best`, dropping its last element (which `kk` is below).
+/// Branch-free: every slot takes its left neighbour, `kk` or itself, so the loop runs the same
+/// way whatever the position (no mispredicted exit) and its iterations are independent.
+#[inline(always)]
+fn insert_sorted(best: &mut [u64], kk: u64) {
+    for j in (1..best.len()).rev() {
+        let (prev, cur) = (best[j - 1], best[j]);
+        best[j] = if kk < prev {
+            prev
+        } else if kk < cur {
+            kk
         } else {
-            (node + half, leaf + half, node + 1, leaf)
+            cur
         };
-        self.radius_rec(near, level + 1, near_leaf, q, off, radius_sq, out);
-        let old = off[d];
-        off[d] = diff.abs();
-        let rd = off[0] * off[0] + off[1] * off[1] + off[2] * off[2];
-        if rd <= radius_sq {
-            self.radius_rec(far, level + 1, far_leaf, q, off, radius_sq, out);
+    }
+    best[0] = best[0].min(kk);
+}
+
+/// Largest buffer that [`sort_small`] sorts.
+const NET_MAX: usize = 16;
+
+/// Batcher's odd-even merge sorting network on `NET_MAX` inputs, restricted for each `n` to the
+/// comparators within `0..n`: `NETS[n].0[..NETS[n].1]`. The restriction sorts `n` inputs because
+/// padding the input with maximal values makes every dropped comparator a no-op.
+const NETS: [([(u8, u8); 63], usize); NET_MAX + 1] = {
+    let mut nets = [([(0u8, 0u8); 63], 0usize); NET_MAX + 1];
+    let mut n = 0;
+    while n <= NET_MAX {
+        let mut p = 1;
+        while p < NET_MAX {
+            let mut k = p;
+            while k >= 1 {
+                let mut j = k % p;
+                while j + k < NET_MAX {
+                    let mut i = 0;
+                    while i < k && i + j + k < NET_MAX {
+                        let (a, b) = (i + j, i + j + k);
+                        if a / (2 * p) == b / (2 * p) && b < n {
+                            nets[n].0[nets[n].1] = (a as u8, b as u8);
+                            nets[n].1 += 1;
+                        }
+                        i += 1;
+                    }
+                    j += 2 * k;
+                }
+                k /= 2;
+            }
+            p *= 2;
         }
-        off[d] = old;
+        n += 1;
+    }
+    nets
+};
+
+/// Sorts `keys` (at most [`NET_MAX`] of them) with a fixed sequence of branch-free
+/// compare-exchanges.
+#[inline(always)]
+fn sort_small(keys: &mut [u64]) {
+    let (net, len) = &NETS[keys.len()];
+    for &(a, b) in &net[..*len] {
+        let (x, y) = (keys[a as usize], keys[b as usize]);
+        keys[a as usize] = x.min(y);
+        keys[b as usize] = x.max(y);
     }
 }
 
@@ -497,11 +669,23 @@ fn build_rec(items: &mut [Item], nodes: &mut [Node], levels: u32) {
     }
 }
 
+/// Copies the subtree with `levels` internal levels from pre-order (`pre`, as [`build_rec`] lays it
+/// out) to breadth-first order in `out`, its root going to `out[at]`.
+fn breadth_first(pre: &[Node], levels: u32, at: usize, out: &mut [Node]) {
+    if levels == 0 {
+        return;
+    }
+    out[at] = pre[0];
+    let (left, right) = pre[1..].split_at(pre.len() / 2);
+    breadth_first(left, levels - 1, 2 * at + 1, out);
+    breadth_first(right, levels - 1, 2 * at + 2, out);
+}
+
 /// Pushes the start of every leaf of the subtree over `lo..hi` with `levels` internal levels,
 /// left to right, following the same middle split as [`build_rec`].
-fn leaf_bounds(lo: usize, hi: usize, levels: u32, out: &mut Vec<u32>) {
+fn leaf_bounds(lo: usize, hi: usize, levels: u32, out: &mut Vec<usize>) {
     if levels == 0 {
-        out.push(lo as u32);
+        out.push(lo);
         return;
     }
     let mid = lo + (hi - lo) / 2;
@@ -604,12 +788,35 @@ mod tests {
     fn leaves_never_exceed_bucket() {
         for n in (0..300).chain([1023, 1024, 1025, 4097, 4159, 100_001]) {
             let t = KdTree::build(&vec![[1.0f32; 3]; n]);
-            assert_eq!(t.leaf_start.len(), (1 << t.depth) + 1);
-            assert!(
-                t.leaf_start.windows(2).all(|w| w[0] <= w[1] && (w[1] - w[0]) as usize <= BUCKET),
-                "n = {n}"
-            );
-            assert_eq!(*t.leaf_start.last().unwrap() as usize, n);
+            let n_leaves = 1usize << t.depth;
+            assert_eq!(t.nodes.len(), n_leaves - 1);
+            assert_eq!((t.slot % LANES, t.idx.len()), (0, t.slot * n_leaves));
+            let mut count = 0;
+            for leaf in t.idx.chunks_exact(t.slot.max(1)) {
+                // Points first, then padding.
+                let used = leaf.iter().take_while(|&&i| i != NO_NEIGHBOR).count();
+                assert!(used <= BUCKET && leaf[used..].iter().all(|&i| i == NO_NEIGHBOR), "n = {n}");
+                count += used;
+            }
+            assert_eq!(count, n);
+            let mut seen: Vec<u32> = t.idx.iter().copied().filter(|&i| i != NO_NEIGHBOR).collect();
+            seen.sort_unstable();
+            assert!(seen.iter().copied().eq(0..n as u32));
+        }
+    }
+
+    #[test]
+    fn small_sorting_networks_sort() {
+        let mut r = Rng::new(7);
+        for n in 0..=NET_MAX {
+            for _ in 0..200 {
+                // Few distinct values, so that ties are common.
+                let mut v: Vec<u64> = (0..n).map(|_| r.below(6) as u64).collect();
+                let mut want = v.clone();
+                want.sort_unstable();
+                sort_small(&mut v);
+                assert_eq!(v, want, "n = {n}");
+            }
         }
     }
 

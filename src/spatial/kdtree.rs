@@ -5,10 +5,11 @@
 //! leaves ("buckets") of at most [`BUCKET`] points, each in a fixed slot padded with NaN points.
 //!
 //! Searches are depth-first without recursion (an explicit stack of pending far subtrees), near
-//! child first, pruned by the distance to a subtree's cell kept per axis (the incremental "rd" of
-//! Arya & Mount). A leaf is scanned by computing all its distances and a mask of those within the
-//! current k-th distance in vector registers; only the few candidates are then inserted into a
-//! sorted buffer, without branches on their position.
+//! child first, pruned by the squared distance to a subtree's cell from per-axis offsets updated
+//! at each split (Arya & Mount's incremental distance, summed afresh so that it stays a lower
+//! bound in floating point). A leaf is scanned by computing all its distances and a mask of those
+//! within the current k-th distance in vector registers; only the few candidates are then
+//! inserted into a sorted buffer, without branches on their position.
 //!
 //! Results are exact and deterministic: squared distances are computed by [`dist_sq`] (always the
 //! same `f32` expression, no fused multiply-add), and among equal distances the smaller original

@@ -26,24 +26,34 @@ pub fn f_info(points: &[[f32; 3]], cands: &Candidates) -> Vec<f32> {
     let mut out = vec![0.0f32; cands.quads.len() * F_INFO_DIM];
     crate::par::for_each_chunk_mut(&mut out, F_INFO_DIM * 256, |ci, chunk| {
         for (r, row) in chunk.chunks_mut(F_INFO_DIM).enumerate() {
-            let q = cands.quads[ci * 256 + r];
-            let p = q.map(|v| points[v as usize]);
-            let s = q.iter().map(|&v| cands.spacing[v as usize]).sum::<f32>() / 4.0;
-            let inv = if s > 0.0 { 1.0 / s } else { 1.0 };
-            for i in 0..4 {
-                for a in 0..3 {
-                    row[3 * i + a] = (p[i][a] - p[0][a]) * inv;
-                }
-            }
-            let g = quad_geom(p);
-            row[12] = g.jacobian;
-            row[13..17].copy_from_slice(&g.sine);
-            for i in 0..4 {
-                row[17 + 3 * i..20 + 3 * i].copy_from_slice(&g.corner_normal[i]);
-            }
+            f_info_row(points, &cands.spacing, cands.quads[ci * 256 + r], row);
         }
     });
     out
+}
+
+/// Writes the F_info of quad `q` (as [`f_info`]) into `row[..F_INFO_DIM]`, with
+/// `spacing` the local spacing per point (`Candidates::spacing`, or one recomputed
+/// for moved points by training augmentation).
+///
+/// # Panics
+/// If `row` is shorter than [`F_INFO_DIM`] or a corner of `q` indexes beyond
+/// `points` or `spacing` (callers check corners against the cloud first).
+pub fn f_info_row(points: &[[f32; 3]], spacing: &[f32], q: [u32; 4], row: &mut [f32]) {
+    let p = q.map(|v| points[v as usize]);
+    let s = q.iter().map(|&v| spacing[v as usize]).sum::<f32>() / 4.0;
+    let inv = if s > 0.0 { 1.0 / s } else { 1.0 };
+    for i in 0..4 {
+        for a in 0..3 {
+            row[3 * i + a] = (p[i][a] - p[0][a]) * inv;
+        }
+    }
+    let g = quad_geom(p);
+    row[12] = g.jacobian;
+    row[13..17].copy_from_slice(&g.sine);
+    for i in 0..4 {
+        row[17 + 3 * i..20 + 3 * i].copy_from_slice(&g.corner_normal[i]);
+    }
 }
 
 /// Undirected edge key.
@@ -80,16 +90,10 @@ pub fn context_features(points: &[[f32; 3]], cands: &Candidates) -> Vec<f32> {
         for (r, row) in chunk.chunks_mut(CONTEXT_DIM).enumerate() {
             let c = ci * 256 + r;
             let q = cands.quads[c];
-            let p = q.map(|v| points[v as usize]);
-            let g = quad_geom(p);
             for i in 0..4 {
-                let (a, b) = (q[i], q[(i + 1) % 4]);
-                row[i] = (count(edge_key(a, b)) - 1) as f32;
-                let s = 0.5 * (cands.spacing[a as usize] + cands.spacing[b as usize]);
-                row[6 + i] = if s > 0.0 { g.len[i] / s } else { 0.0 };
-                let nv = cands.normals[q[i] as usize];
-                row[10 + i] = nv[0] * g.normal[0] + nv[1] * g.normal[1] + nv[2] * g.normal[2];
+                row[i] = (count(edge_key(q[i], q[(i + 1) % 4])) - 1) as f32;
             }
+            context_geometry_row(points, &cands.spacing, &cands.normals, q, row);
             row[4] = cands.rank[c] as f32;
             row[5] = cands.proposers[c] as f32;
             row[14] = cands.inside[c] as f32;
@@ -97,6 +101,33 @@ pub fn context_features(points: &[[f32; 3]], cands: &Candidates) -> Vec<f32> {
         }
     });
     out
+}
+
+/// The context columns of quad `q` that depend on the point positions (6–13 of
+/// [`context_features`]: edge lengths over the local spacing and the agreement of the
+/// corners' normals with the face normal), written into `row[6..14]`; the other
+/// columns (edge sharing, rank, proposers, inside count, score) describe candidate
+/// generation and are left alone. `spacing` and `normals` are per point
+/// (`Candidates::spacing` and `Candidates::normals`, or recomputed for moved points).
+///
+/// # Panics
+/// If `row` is shorter than 14 or a corner of `q` indexes beyond `points`, `spacing`
+/// or `normals`.
+pub fn context_geometry_row(
+    points: &[[f32; 3]],
+    spacing: &[f32],
+    normals: &[[f32; 3]],
+    q: [u32; 4],
+    row: &mut [f32],
+) {
+    let g = quad_geom(q.map(|v| points[v as usize]));
+    for i in 0..4 {
+        let (a, b) = (q[i], q[(i + 1) % 4]);
+        let s = 0.5 * (spacing[a as usize] + spacing[b as usize]);
+        row[6 + i] = if s > 0.0 { g.len[i] / s } else { 0.0 };
+        let nv = normals[q[i] as usize];
+        row[10 + i] = nv[0] * g.normal[0] + nv[1] * g.normal[1] + nv[2] * g.normal[2];
+    }
 }
 
 /// The network input rows for `cands`: F_info, then (if `with_context`) the context

@@ -1,5 +1,6 @@
 //! The Point2Quad pipeline: normalising frame, normals, candidate quads and their features, noise and datasets, the model, training and reconstruction.
 
+pub mod augment;
 pub mod candidates;
 pub mod dataset;
 pub mod features;

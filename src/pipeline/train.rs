@@ -1,18 +1,27 @@
 //! Training: the compound loss (weighted cross-entropy + face loss, DESIGN §4), SGD
 //! with momentum and exponential decay, one point cloud (sample) per step with at
-//! most `max_candidates` candidates drawn uniformly from it, rotation augmentation,
+//! most `max_candidates` candidates drawn uniformly from it, geometric augmentation,
 //! validation precision/recall after every epoch, a checkpoint after every epoch,
 //! and exact resumption (weights, momentum buffers, epoch, step and RNG state).
 //!
-//! Augmentation: a uniformly random rotation per step, applied to the vector-valued
-//! F_info columns (the 4 relative corner positions and the 4 corner normals) — the
-//! exact effect of rotating the cloud, since F_info's scalars (scaled Jacobian,
-//! sines) and the context features are rotation invariant — and, for a model with a
-//! point encoder, to the sample's points before the KPFCNN pyramid is built (about the
-//! frame's origin, the cloud's centroid; grid subsampling is not rotation invariant, so
-//! the pyramid is rebuilt every step). Anisotropic scaling and fresh noise would need
-//! new candidates; they come from the dataset instead (`point2quad dataset` draws noise
-//! per sample).
+//! Augmentation, per step, drawn from the training RNG (so resuming replays it):
+//! * a uniformly random rotation (`rotate`);
+//! * an anisotropic scale, each axis of a random orthonormal frame scaled by a factor
+//!   uniform in `scale` (default 0.9–1.1);
+//! * a Gaussian jitter of every point, σ = `jitter` × its local spacing (default 0.01).
+//!
+//! With scale or jitter on, the sample's points are moved (jitter, then rotation ·
+//! scale) and the face input of the drawn candidates is recomputed from the moved points
+//! ([`crate::pipeline::augment`]: F_info and the position-dependent context columns,
+//! with normals and spacing recomputed over the dataset's kNN rows, cached per sample at
+//! the start of training); the candidates and labels stay the dataset's. With rotation
+//! alone it is cheaper and exact to rotate F_info's vector columns (the 4 relative
+//! corner positions and the 4 corner normals): F_info's scalars and the context are
+//! rotation invariant. A model with a point encoder gets the same moved points (about
+//! the frame's origin, the cloud's centroid; grid subsampling is not rotation invariant,
+//! so the pyramid is rebuilt every step). Fresh noise points per epoch would need new
+//! candidates (about a second per 10k-point cloud), so noise comes from the dataset
+//! (`point2quad dataset` draws it per sample).
 //!
 //! With a point encoder each step runs the KPFCNN over all the sample's points (batch
 //! norm in train mode over them) and gathers the features of the drawn candidates'
@@ -22,6 +31,8 @@ use crate::nn::checkpoint::TrainState;
 use crate::nn::kpfcnn::prepare;
 use crate::nn::loss::{face_loss, weighted_cross_entropy};
 use crate::nn::optim::{ExpDecay, Sgd, SgdConfig};
+use crate::pipeline::augment::{self, Augmentation, SampleGeometry};
+use crate::pipeline::candidates::CandidateConfig;
 use crate::pipeline::dataset::Sample;
 use crate::pipeline::model::{check_corners, corner_indices, Model};
 use crate::rng::Rng;
@@ -33,7 +44,7 @@ use crate::{Error, Result};
 pub struct TrainConfig {
     /// Epochs to reach (a resumed run continues up to this number).
     pub epochs: usize,
-    /// Seed of the training RNG (sample order, candidate subsets, rotations).
+    /// Seed of the training RNG (sample order, candidate subsets, augmentation).
     pub seed: u64,
     /// Optimiser settings (learning rate is the schedule's start).
     pub sgd: SgdConfig,
@@ -47,6 +58,16 @@ pub struct TrainConfig {
     pub max_candidates: usize,
     /// Random rotation augmentation.
     pub rotate: bool,
+    /// Anisotropic scale augmentation: each axis of a random orthonormal frame scaled
+    /// by a factor uniform in `[min, max)` (finite, 0 < min <= max); `None`: off.
+    pub scale: Option<(f32, f32)>,
+    /// Jitter augmentation: Gaussian offsets of every point with σ = `jitter` × the
+    /// point's local spacing (finite, >= 0; 0: off).
+    pub jitter: f32,
+    /// The candidate settings the dataset was built with: with scale or jitter on, its
+    /// `k`, `normal_k` and `spacing_k` rebuild the neighbours of the recomputed normals
+    /// and spacing (`point2quad dataset` uses the default).
+    pub candidates: CandidateConfig,
 }
 
 impl Default for TrainConfig {
@@ -66,6 +87,9 @@ impl Default for TrainConfig {
             face_loss_weight: 1.0,
             max_candidates: 12_000,
             rotate: true,
+            scale: Some((0.9, 1.1)),
+            jitter: 0.01,
+            candidates: CandidateConfig::default(),
         }
     }
 }
@@ -221,8 +245,9 @@ pub fn evaluate(model: &Model, samples: &[Sample], threshold: f32) -> Result<Cla
 /// called after every epoch with the state to save.
 ///
 /// # Errors
-/// Inconsistent samples, an empty training set, non-finite losses (diverged), and
-/// whatever `checkpoint` returns.
+/// Inconsistent samples, an empty training set, bad augmentation settings
+/// ([`augment::check_settings`]), non-finite losses (diverged), and whatever
+/// `checkpoint` returns.
 pub fn train(
     model: &mut Model,
     train: &[Sample],
@@ -235,9 +260,23 @@ pub fn train(
     let fin = model.config().face_in();
     check_samples(train, model)?;
     check_samples(val, model)?;
+    augment::check_settings(cfg.scale, cfg.jitter)?;
     let usable: Vec<usize> = (0..train.len()).filter(|&i| !train[i].labels.is_empty()).collect();
     if usable.is_empty() {
         return Err(Error::invalid("no training sample has candidates"));
+    }
+    // Moving points needs each sample's neighbours, normals and spacing: built once
+    // (deterministic, no RNG), so a resumed run rebuilds the same.
+    let moves_points = cfg.scale.is_some() || cfg.jitter > 0.0;
+    let mut geometry: Vec<Option<SampleGeometry>> = vec![None; train.len()];
+    if moves_points {
+        for &i in &usable {
+            let s = &train[i];
+            geometry[i] = Some(
+                SampleGeometry::new(&s.points, &s.candidates, &cfg.candidates)
+                    .map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))?,
+            );
+        }
     }
     let pos_weight = cfg.pos_weight.unwrap_or_else(|| auto_pos_weight(train));
     let mut sgd = Sgd::new(cfg.sgd)?;
@@ -266,24 +305,33 @@ pub fn train(
                 pick.truncate(cfg.max_candidates);
                 pick.sort_unstable();
             }
-            let rot = if cfg.rotate { Some(rng.rotation()) } else { None };
-            let mut x = Vec::with_capacity(pick.len() * fin);
-            let mut labels = Vec::with_capacity(pick.len());
-            for &c in &pick {
-                let start = x.len();
-                x.extend_from_slice(row(s, c, fin));
-                if let Some(r) = &rot {
-                    rotate_row(&mut x[start..], r);
+            let labels: Vec<u8> = pick.iter().map(|&c| s.labels[c]).collect();
+            // The face input and the points the point encoder sees (`None`: the stored ones).
+            let (x, moved) = match &geometry[si] {
+                Some(geo) => {
+                    let aug = Augmentation::draw(&mut rng, cfg.rotate, cfg.scale, cfg.jitter, geo.spacing())?;
+                    let moved = aug.apply(&s.points);
+                    let (normals, spacing) = geo.recompute(&moved, &aug);
+                    (augment::face_rows(s, &pick, fin, &moved, &normals, &spacing), Some(moved))
                 }
-                labels.push(s.labels[c]);
-            }
+                None => {
+                    let rot = if cfg.rotate { Some(rng.rotation()) } else { None };
+                    let mut x = Vec::with_capacity(pick.len() * fin);
+                    for &c in &pick {
+                        let start = x.len();
+                        x.extend_from_slice(row(s, c, fin));
+                        if let Some(r) = &rot {
+                            rotate_row(&mut x[start..], r);
+                        }
+                    }
+                    let encoded = model.net.point_encoder().is_some();
+                    (x, rot.filter(|_| encoded).map(|r| rotate_points(&s.points, &r)))
+                }
+            };
             let Model { net, params } = &mut *model;
             let pyramid = match net.point_encoder() {
                 Some(kp) => {
-                    let pts = match &rot {
-                        Some(r) => prepare(&rotate_points(&s.points, r), kp.config()),
-                        None => prepare(&s.points, kp.config()),
-                    };
+                    let pts = prepare(moved.as_deref().unwrap_or(&s.points), kp.config());
                     Some(pts.map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))?)
                 }
                 None => None,
@@ -371,5 +419,37 @@ mod tests {
             }
         }
         assert!(moved > 0.1, "the rotation moved nothing: the check could not fail");
+    }
+
+    /// The two augmentation paths agree on a rotation: the face input recomputed from
+    /// rotated points (the path taken with scale or jitter on) equals the stored input
+    /// with F_info's vectors rotated (the rotation-only path), context included.
+    #[test]
+    fn recomputed_input_under_a_rotation_equals_the_rotated_stored_input() {
+        use crate::pipeline::augment::{face_rows, Augmentation, SampleGeometry};
+        use crate::pipeline::dataset::build_sample;
+        use crate::pipeline::features::CONTEXT_DIM;
+        let cfg = CandidateConfig { k: 12, per_point: 6, ..CandidateConfig::default() };
+        let mesh = crate::mesh::shapes::torus(14, 7, 1.0, 0.4);
+        let s = build_sample("torus", &mesh, &Default::default(), &cfg, &mut Rng::new(2)).unwrap();
+        let fin = F_INFO_DIM + CONTEXT_DIM;
+        let geo = SampleGeometry::new(&s.points, &s.candidates, &cfg).unwrap();
+        let r = Rng::new(5).rotation();
+        let aug = Augmentation::linear(r).unwrap();
+        let moved = aug.apply(&s.points);
+        let (normals, spacing) = geo.recompute(&moved, &aug);
+        let picks: Vec<usize> = (0..s.labels.len()).collect();
+        let got = face_rows(&s, &picks, fin, &moved, &normals, &spacing);
+        let mut want = sample_input(&s, fin);
+        let mut changed = 0.0f32;
+        for (g, w) in got.chunks_exact(fin).zip(want.chunks_exact_mut(fin)) {
+            let before = w.to_vec();
+            rotate_row(w, &r);
+            for (j, (a, b)) in g.iter().zip(w.iter()).enumerate() {
+                assert!((a - b).abs() <= 1e-4 * (1.0 + b.abs()), "column {j}: {a} vs {b}");
+                changed = changed.max((a - before[j]).abs());
+            }
+        }
+        assert!(changed > 0.1, "the rotation changed nothing: the check could not fail");
     }
 }

@@ -45,6 +45,19 @@ OPTIONS:
     --lr X                initial learning rate [0.01]
     --val-fraction F      share of samples held out for validation [0.15]
     --max-candidates M    candidates drawn per step [12000]
+
+AUGMENTATION (per step, from the training RNG; not stored in checkpoints, so give
+the same options when resuming):
+    --scale MIN,MAX       anisotropic scale: each axis of a random orthonormal frame
+                          scaled by a factor uniform in [MIN, MAX), 0 < MIN <= MAX
+                          [0.9,1.1]; 1,1 turns it off
+    --jitter F            Gaussian jitter of every point, sigma = F x its local
+                          spacing, 0 <= F <= 1 [0.01]; 0 turns it off
+    --no-rotate           no random rotation
+    --no-augment          none of the three (cannot be combined with the others)
+  With scale or jitter on, the face input of the drawn candidates is recomputed
+  from the moved points (the candidates and labels stay the dataset's), and the
+  point encoder sees the same points. Noise points come from the dataset.
 ";
 
 const SPEC: Spec = Spec {
@@ -58,8 +71,10 @@ const SPEC: Spec = Spec {
         "--lr",
         "--val-fraction",
         "--max-candidates",
+        "--scale",
+        "--jitter",
     ],
-    switches: &[],
+    switches: &["--no-rotate", "--no-augment"],
 };
 
 fn fnv(s: &str) -> u64 {
@@ -85,6 +100,52 @@ fn load_dir(dir: &Path) -> Result<Vec<Sample>> {
     files.iter().map(|p| load_sample(p)).collect()
 }
 
+/// Parses `--scale MIN,MAX`: two finite numbers with 0 < MIN <= MAX.
+fn parse_scale(v: &str) -> Result<(f32, f32)> {
+    let bad = |why: &str| {
+        Error::Usage(format!("train: --scale {v:?}: {why} (see `point2quad train --help`)"))
+    };
+    let (lo, hi) = v.split_once(',').ok_or_else(|| bad("expected MIN,MAX, e.g. 0.9,1.1"))?;
+    let num = |x: &str| x.trim().parse::<f32>().map_err(|_| bad(&format!("cannot parse {x:?} as a number")));
+    let (lo, hi) = (num(lo)?, num(hi)?);
+    if !(lo.is_finite() && hi.is_finite()) {
+        return Err(bad("MIN and MAX must be finite"));
+    }
+    if lo <= 0.0 {
+        return Err(bad("MIN must be positive"));
+    }
+    if lo > hi {
+        return Err(bad("MIN must not exceed MAX"));
+    }
+    Ok((lo, hi))
+}
+
+/// The augmentation options into `cfg` (defaults: `TrainConfig`'s).
+fn augmentation(a: &Args, cfg: &mut TrainConfig) -> Result<()> {
+    let cmd = "train";
+    if a.switch("--no-augment") {
+        if a.value("--scale").is_some() || a.value("--jitter").is_some() || a.switch("--no-rotate") {
+            return Err(Error::Usage(
+                "train: --no-augment cannot be combined with --scale, --jitter or --no-rotate".into(),
+            ));
+        }
+        cfg.rotate = false;
+        cfg.scale = None;
+        cfg.jitter = 0.0;
+        return Ok(());
+    }
+    cfg.rotate = !a.switch("--no-rotate");
+    if let Some(v) = a.value("--scale") {
+        let (lo, hi) = parse_scale(v)?;
+        cfg.scale = if lo == 1.0 && hi == 1.0 { None } else { Some((lo, hi)) };
+    }
+    cfg.jitter = a.parsed_in(cmd, "--jitter", cfg.jitter, 0.0, 1.0, "a fraction of the local point spacing")?;
+    if cfg.jitter.is_nan() {
+        return Err(Error::Usage("train: --jitter must be a number between 0 and 1, got NaN".into()));
+    }
+    Ok(())
+}
+
 pub fn run(argv: &[String]) -> Result<()> {
     let cmd = "train";
     let a = Args::parse(cmd, argv, &SPEC)?;
@@ -105,6 +166,7 @@ pub fn run(argv: &[String]) -> Result<()> {
             "train: --val-fraction must be in [0, 1), --max-candidates and --lr positive".into(),
         ));
     }
+    augmentation(&a, &mut cfg)?;
     let ckpt_path = PathBuf::from(format!("{}.ckpt", out.display()));
 
     let (mut model, resume) = match a.value("--resume") {

@@ -1,8 +1,16 @@
 //! One training step of the Point2Quad model on a ~10,000-point sample, as `pipeline::train`
-//! runs it (12,000 candidates drawn, a random rotation, KPFCNN over every point in train mode,
-//! loss, backward, SGD step), for the `default_kp` preset, with its KPFCNN part measured on its
-//! own (pyramid, forward + backward) and the `default` preset (no point encoder) beside it; plus
-//! inference (`predict_with_points`, what `reconstruct` runs) and the parameter counts.
+//! runs it (12,000 candidates drawn, the default augmentation — rotation, anisotropic scale,
+//! jitter, face input recomputed from the moved points —, KPFCNN over every point in train
+//! mode, loss, backward, SGD step), for the `default_kp` preset, with its KPFCNN part measured
+//! on its own (pyramid, forward + backward) and the `default` preset (no point encoder) beside
+//! it; plus inference (`predict_with_points`, what `reconstruct` runs) and the parameter counts.
+//!
+//! Each measured `train_step_*` call is a whole one-sample, one-epoch `train` run, so it also
+//! builds the sample's augmentation geometry (kNN rows, normals, spacing), which a real run
+//! does once per sample at its start: `augment_geometry_10k` is that part, and
+//! `augment_step_10k` the per-step augmentation itself (draw, move the points, recompute
+//! normals, spacing and the face input of 12,000 candidates). `train_step_rotate_only_*` is
+//! the same step with rotation as the only augmentation (scale and jitter off).
 //!
 //! The sample: the `.p2qs` file named by `P2Q_BENCH_SAMPLE` if set (e.g. a dataset sample of a
 //! train mesh), otherwise a synthetic torus (100 × 91 quads, 9,100 vertices + 10% noise points =
@@ -12,6 +20,7 @@
 use std::path::Path;
 
 use point2quad::nn::kpfcnn::prepare;
+use point2quad::pipeline::augment::{face_rows, Augmentation, SampleGeometry};
 use point2quad::pipeline::candidates::CandidateConfig;
 use point2quad::pipeline::dataset::{build_sample, load_sample, Sample};
 use point2quad::pipeline::model::{Model, ModelConfig};
@@ -33,9 +42,14 @@ fn sample() -> Sample {
         .expect("synthetic sample")
 }
 
-/// One epoch over a one-sample training set (= one step), no validation, no checkpoint.
-fn step(model: &mut Model, s: &Sample, seed: u64) {
-    let cfg = TrainConfig { epochs: 1, seed, ..TrainConfig::default() };
+/// One epoch over a one-sample training set (= one step), no validation, no checkpoint;
+/// `full_augment` false: rotation only (what training did before scale and jitter).
+fn step(model: &mut Model, s: &Sample, seed: u64, full_augment: bool) {
+    let mut cfg = TrainConfig { epochs: 1, seed, ..TrainConfig::default() };
+    if !full_augment {
+        cfg.scale = None;
+        cfg.jitter = 0.0;
+    }
     train(model, std::slice::from_ref(s), &[], &cfg, None, &mut |_| {}, &mut |_, _| Ok(())).expect("step");
 }
 
@@ -46,16 +60,40 @@ fn main() {
     println!("bench train_step_threads {} threads", point2quad::par::num_threads());
     println!("bench train_step_sample_points {} points", s.points.len());
     println!("bench train_step_sample_candidates {} candidates", s.candidates.len());
+    let cand_cfg = CandidateConfig::default();
+    let (t, cpu) = timed(runs, || {
+        std::hint::black_box(SampleGeometry::new(&s.points, &s.candidates, &cand_cfg).expect("geometry"));
+    });
+    println!("bench augment_geometry_10k {t:.1} ms");
+    println!("bench augment_geometry_cpu_10k {cpu:.0} ms");
+    let geo = SampleGeometry::new(&s.points, &s.candidates, &cand_cfg).expect("geometry");
+    let tc = TrainConfig::default();
+    let picks: Vec<usize> = (0..s.candidates.len()).step_by(8).take(tc.max_candidates).collect();
+    let mut rng = Rng::new(4);
+    let (t, cpu) = timed(runs, || {
+        let aug = Augmentation::draw(&mut rng, tc.rotate, tc.scale, tc.jitter, geo.spacing()).expect("draw");
+        let moved = aug.apply(&s.points);
+        let (normals, spacing) = geo.recompute(&moved, &aug);
+        std::hint::black_box(face_rows(&s, &picks, s.feature_dim as usize, &moved, &normals, &spacing));
+    });
+    println!("bench augment_step_10k {t:.1} ms");
+    println!("bench augment_step_cpu_10k {cpu:.0} ms");
     for preset in ["default_kp", "default"] {
         let mut model = Model::new(ModelConfig::preset(preset).expect("preset"), 0).expect("model");
         println!("bench params_{preset} {} params", model.param_count());
         let mut seed = 0;
         let (t, cpu) = timed(runs, || {
             seed += 1;
-            step(&mut model, &s, seed);
+            step(&mut model, &s, seed, true);
         });
         println!("bench train_step_10k_{preset} {t:.1} ms");
         println!("bench train_step_cpu_10k_{preset} {cpu:.0} ms");
+        let (t, cpu) = timed(runs, || {
+            seed += 1;
+            step(&mut model, &s, seed, false);
+        });
+        println!("bench train_step_rotate_only_10k_{preset} {t:.1} ms");
+        println!("bench train_step_rotate_only_cpu_10k_{preset} {cpu:.0} ms");
         let x = sample_input(&s, model.config().face_in());
         let (t, cpu) = timed(runs, || {
             std::hint::black_box(model.predict_with_points(&s.points, &s.candidates, &x).expect("predict"));

@@ -79,13 +79,20 @@ impl SampleGeometry {
     /// # Errors
     /// `InvalidInput` when a point is not finite or a candidate refers to a point that
     /// does not exist.
-    pub fn new(points: &[[f32; 3]], candidates: &[[u32; 4]], cfg: &CandidateConfig) -> Result<SampleGeometry> {
+    pub fn new(
+        points: &[[f32; 3]],
+        candidates: &[[u32; 4]],
+        cfg: &CandidateConfig,
+    ) -> Result<SampleGeometry> {
         let n = points.len();
         if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
             return Err(Error::invalid(format!("point {i} is not finite")));
         }
-        if let Some((c, q)) = candidates.iter().enumerate().find(|(_, q)| q.iter().any(|&v| v as usize >= n)) {
-            return Err(Error::invalid(format!("candidate {c} {q:?} refers to a point beyond the {n} given")));
+        if let Some((c, q)) = candidates.iter().enumerate().find(|(_, q)| q.iter().any(|&v| v as usize >= n))
+        {
+            return Err(Error::invalid(format!(
+                "candidate {c} {q:?} refers to a point beyond the {n} given"
+            )));
         }
         // The table `candidates::generate` searches (a kNN row's prefix does not depend
         // on k: rows are ordered by (distance, index)), then its normal table.
@@ -202,7 +209,8 @@ impl SampleGeometry {
             let i = self.corners[k] as usize;
             let nv = pca_normal(moved, moved[i], &self.normal_rows[i * w..(i + 1) * w]);
             let reference = mat_vec(it, crate::math::to_f64(self.normals[i]));
-            let agree = nv[0] as f64 * reference[0] + nv[1] as f64 * reference[1] + nv[2] as f64 * reference[2];
+            let agree =
+                nv[0] as f64 * reference[0] + nv[1] as f64 * reference[1] + nv[2] as f64 * reference[2];
             if agree < 0.0 {
                 [-nv[0], -nv[1], -nv[2]]
             } else {
@@ -301,9 +309,8 @@ impl Augmentation {
             Some((lo, hi)) => {
                 let q = rng.rotation();
                 let s = [0; 3].map(|_| rng.uniform(lo as f64, hi as f64));
-                let diag = |f: &dyn Fn(f64) -> f64| {
-                    [[f(s[0]), 0.0, 0.0], [0.0, f(s[1]), 0.0], [0.0, 0.0, f(s[2])]]
-                };
+                let diag =
+                    |f: &dyn Fn(f64) -> f64| [[f(s[0]), 0.0, 0.0], [0.0, f(s[1]), 0.0], [0.0, 0.0, f(s[2])]];
                 let qt = transpose(&q);
                 let scale_m = mat_mul(&qt, &mat_mul(&diag(&|x| x), &q));
                 let inv_scale = mat_mul(&qt, &mat_mul(&diag(&|x| 1.0 / x), &q));

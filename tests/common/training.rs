@@ -1,5 +1,5 @@
 //! Shared helpers for the training tests: a tiny in-memory dataset, a training config
-//! that exercises the RNG (subsampling, rotations), and bit-level snapshots of a model.
+//! that exercises the RNG (subsampling, augmentation), and bit-level snapshots of a model.
 
 #![allow(dead_code)]
 
@@ -19,7 +19,7 @@ pub fn samples() -> Vec<Sample> {
         ("torus", shapes::torus(12, 6, 1.0, 0.4)),
         ("hill", shapes::height_field(9, 9, |u, v| 0.3 * (2.0 * u).sin() * v)),
     ];
-    let cand = CandidateConfig { k: 12, per_point: 8, ..CandidateConfig::default() };
+    let cand = candidate_cfg();
     meshes
         .iter()
         .enumerate()
@@ -30,10 +30,22 @@ pub fn samples() -> Vec<Sample> {
         .collect()
 }
 
-/// Subsampling (200 of ~300 candidates) and rotations on: a resume test must see the
-/// RNG state restored, not only the weights.
+/// The candidate settings of [`samples`].
+pub fn candidate_cfg() -> CandidateConfig {
+    CandidateConfig { k: 12, per_point: 8, ..CandidateConfig::default() }
+}
+
+/// Subsampling (200 of ~300 candidates) and the default augmentation (rotation,
+/// anisotropic scale, jitter) on: a resume test must see the RNG state restored, not
+/// only the weights.
 pub fn train_cfg(epochs: usize) -> TrainConfig {
-    TrainConfig { epochs, seed: 11, max_candidates: 200, ..TrainConfig::default() }
+    TrainConfig {
+        epochs,
+        seed: 11,
+        max_candidates: 200,
+        candidates: candidate_cfg(),
+        ..TrainConfig::default()
+    }
 }
 
 /// Every tensor of the store (parameters, batch-norm buffers, kernel points), by

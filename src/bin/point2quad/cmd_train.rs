@@ -102,9 +102,8 @@ fn load_dir(dir: &Path) -> Result<Vec<Sample>> {
 
 /// Parses `--scale MIN,MAX`: two finite numbers with 0 < MIN <= MAX.
 fn parse_scale(v: &str) -> Result<(f32, f32)> {
-    let bad = |why: &str| {
-        Error::Usage(format!("train: --scale {v:?}: {why} (see `point2quad train --help`)"))
-    };
+    let bad =
+        |why: &str| Error::Usage(format!("train: --scale {v:?}: {why} (see `point2quad train --help`)"));
     let (lo, hi) = v.split_once(',').ok_or_else(|| bad("expected MIN,MAX, e.g. 0.9,1.1"))?;
     let num = |x: &str| x.trim().parse::<f32>().map_err(|_| bad(&format!("cannot parse {x:?} as a number")));
     let (lo, hi) = (num(lo)?, num(hi)?);
@@ -139,7 +138,8 @@ fn augmentation(a: &Args, cfg: &mut TrainConfig) -> Result<()> {
         let (lo, hi) = parse_scale(v)?;
         cfg.scale = if lo == 1.0 && hi == 1.0 { None } else { Some((lo, hi)) };
     }
-    cfg.jitter = a.parsed_in(cmd, "--jitter", cfg.jitter, 0.0, 1.0, "a fraction of the local point spacing")?;
+    cfg.jitter =
+        a.parsed_in(cmd, "--jitter", cfg.jitter, 0.0, 1.0, "a fraction of the local point spacing")?;
     if cfg.jitter.is_nan() {
         return Err(Error::Usage("train: --jitter must be a number between 0 and 1, got NaN".into()));
     }

@@ -1,9 +1,13 @@
 //! The half-edge quad mesh: connectivity only (positions live with the caller), kept an
-//! oriented 2-manifold at every step. `add_face` plans first and mutates only when the
+//! oriented 2-manifold between calls. `add_face` plans first and mutates only when the
 //! result stays manifold; where a new quad joins two patches of opposite orientation the
-//! smaller patch is flipped (DESIGN §8) instead of refusing the face.
+//! smaller patch is flipped (DESIGN §8) instead of refusing the face. `insert_faces` may let
+//! a vertex hold several fans for a while, as robust half-edge libraries do while a mesh is
+//! built, so that faces given in any order assemble; it returns only a mesh whose every
+//! vertex has one fan.
 
-use std::collections::{BinaryHeap, HashMap, HashSet, VecDeque};
+use std::cmp::Reverse;
+use std::collections::{BTreeMap, BTreeSet, BinaryHeap, HashMap, HashSet, VecDeque};
 
 use super::handles::{FaceId, HalfedgeId, VertexId};
 use super::poly::QuadMesh;
@@ -16,7 +20,11 @@ use crate::error::{Error, Result};
 /// - `next`/`prev` are inverse permutations on live half-edges; a face's cycle has length 4,
 ///   a boundary half-edge (no face) links to the next boundary half-edge of its loop;
 /// - every vertex has at most one fan of faces (a disk or a half-disk); its outgoing
-///   half-edge is a boundary one when it is on the boundary, `None` when it is isolated;
+///   half-edge is a boundary one when it is on the boundary, `None` when it is isolated.
+///   Only inside [`HalfedgeMesh::insert_faces`] may a vertex hold several open fans: their
+///   boundary half-edges are then linked into one cycle around it (the incoming boundary
+///   half-edge of each fan to the outgoing one of the next), so that the rotation still
+///   reaches every outgoing half-edge;
 /// - no two edges join the same two vertices, no face repeats a vertex.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct HalfedgeMesh {
@@ -62,8 +70,11 @@ pub enum RefusalKind {
     Duplicate,
     /// A corner vertex is already interior (its faces form a closed disk).
     ClosedVertex,
-    /// A corner vertex already has a fan the quad does not attach to (it would get two
-    /// fans). The only kind that can succeed later, once neighbouring faces arrive.
+    /// A corner vertex has a fan the quad touches only at that vertex, so the vertex would
+    /// hold two fans (the quad may fit later, once the faces between arrive;
+    /// `insert_faces` reports the faces still in that state at its end). Inside
+    /// `insert_faces`, where a vertex may hold several fans for a while, also: the quad
+    /// would close one of them into a disk beside another.
     SecondFan(VertexId),
     /// The quad would join one patch to itself with opposite orientations.
     Orientation,
@@ -74,7 +85,9 @@ pub enum RefusalKind {
 pub struct InsertOutcome {
     /// Per input face: its face handle if it was inserted.
     pub inserted: Vec<Option<FaceId>>,
-    /// Refused input faces (index into the input, reason), in refusal order.
+    /// Refused input faces (index into the input, reason): first those refused outright,
+    /// in refusal order, then, by rank in `order`, those still waiting at the end because
+    /// they would give a corner a second fan ([`RefusalKind::SecondFan`]).
     pub refused: Vec<(usize, Refusal)>,
 }
 
@@ -82,6 +95,90 @@ pub struct InsertOutcome {
 struct Plan {
     quad: [VertexId; 4],
     flip: Vec<FaceId>,
+}
+
+/// How many rounds of its second phase [`HalfedgeMesh::insert_faces`] runs, each after
+/// taking back the faces that left a vertex with two fans in the one before, before it
+/// gives up forcing. Each round takes back at least one face. Measured: a valid manifold
+/// needs one round; the post-process benchmark's soup (`benches/mesh_insert.rs`) two; the
+/// random soups of `tests/mesh_props.rs` (up to as many wrong quads as true ones) one to
+/// three as a rule, and 8 in 1 of ~4,500 batches.
+const FORCE_ROUNDS: usize = 8;
+
+/// One open fan around a vertex, as `flip_patch` sees it: its incoming boundary
+/// half-edge, its outgoing one, and whether it belongs to the patch being flipped.
+type FanEnds = (HalfedgeId, HalfedgeId, bool);
+
+/// Whether quad `f` has the edge {a, b} (either direction).
+fn has_edge(f: [u32; 4], a: u32, b: u32) -> bool {
+    (0..4).any(|k| {
+        let (x, y) = (f[k], f[(k + 1) % 4]);
+        (x == a && y == b) || (x == b && y == a)
+    })
+}
+
+/// The state of one [`HalfedgeMesh::insert_faces`] call; cloned to restart its second phase.
+#[derive(Clone)]
+struct Batch {
+    /// Ranks (positions in `order`) to try, smallest first; a rank may be pushed again
+    /// after deferral.
+    heap: BinaryHeap<Reverse<usize>>,
+    /// Per vertex: ranks refused with `SecondFan` at it, retried once a face is added there.
+    waiting: HashMap<u32, Vec<usize>>,
+    /// Ranks waiting, with the refusal that made them wait.
+    deferred: BTreeMap<usize, Refusal>,
+    /// Per rank: inserted or refused for good.
+    done: Vec<bool>,
+    /// The faces inserted, as (rank, face), in insertion order.
+    added: Vec<(usize, FaceId)>,
+    out: InsertOutcome,
+}
+
+impl Batch {
+    /// Inserts what the heap holds, highest priority first, deferring faces that would
+    /// start a second fan at a corner, until the heap is empty.
+    fn drain(&mut self, mesh: &mut HalfedgeMesh, faces: &[[u32; 4]], order: &[usize]) {
+        while let Some(Reverse(r)) = self.heap.pop() {
+            if self.done[r] {
+                continue;
+            }
+            let i = order[r];
+            match mesh.plan_face(faces[i].map(VertexId), false) {
+                Ok(plan) => {
+                    let f = mesh.apply_plan(plan);
+                    self.accept(r, i, f, faces);
+                }
+                Err(refusal) => match refusal.kind {
+                    RefusalKind::SecondFan(v) => {
+                        self.waiting.entry(v.0).or_default().push(r);
+                        self.deferred.insert(r, refusal);
+                    }
+                    _ => self.refuse(r, i, refusal),
+                },
+            }
+        }
+    }
+
+    /// Records face `f` for rank `r` (input `i`) and queues the faces waiting at its corners.
+    fn accept(&mut self, r: usize, i: usize, f: FaceId, faces: &[[u32; 4]]) {
+        self.done[r] = true;
+        self.deferred.remove(&r);
+        self.out.inserted[i] = Some(f);
+        self.added.push((r, f));
+        for v in faces[i] {
+            if let Some(list) = self.waiting.remove(&v) {
+                let done = &self.done;
+                self.heap.extend(list.into_iter().filter(|&q| !done[q]).map(Reverse));
+            }
+        }
+    }
+
+    /// Refuses rank `r` (input `i`) for good.
+    fn refuse(&mut self, r: usize, i: usize, refusal: Refusal) {
+        self.done[r] = true;
+        self.deferred.remove(&r);
+        self.out.refused.push((i, refusal));
+    }
 }
 
 impl HalfedgeMesh {
@@ -102,8 +199,7 @@ impl HalfedgeMesh {
     }
 
     /// Builds a mesh from quads (indices into `0..n_vertices`). The faces may come in any
-    /// order: a face that touches an existing fan only at a vertex is retried once its
-    /// neighbours are in (see [`HalfedgeMesh::insert_faces`]).
+    /// order and orientation (see [`HalfedgeMesh::insert_faces`]).
     ///
     /// # Errors
     /// `Topology` naming the first face that cannot be inserted (non-manifold input,
@@ -370,65 +466,186 @@ impl HalfedgeMesh {
     /// # Errors
     /// The [`Refusal`] saying why; the mesh is then unchanged.
     pub fn try_add_face(&mut self, vs: [VertexId; 4]) -> std::result::Result<FaceId, Refusal> {
-        let plan = self.plan_face(vs)?;
+        let plan = self.plan_face(vs, false)?;
         Ok(self.apply_plan(plan))
     }
 
-    /// Inserts `faces[order[0]]`, `faces[order[1]]`, … (earlier = higher priority). A face
-    /// refused only because a corner already has a fan it does not touch is retried each
-    /// time a face is added at that corner, still in priority order, so the result does
-    /// not depend on the accidents of the order in which neighbours arrive. Indices in
-    /// `order` that are out of range are ignored.
+    /// Inserts `faces[order[0]]`, `faces[order[1]]`, … (earlier = higher priority) and
+    /// returns a mesh whose every vertex has one fan. Indices in `order` that are out of
+    /// range are ignored.
+    ///
+    /// Any face set that forms an oriented 2-manifold goes in whole, in any order and
+    /// orientation. Faces that do not fit are refused; among faces that conflict, the
+    /// earlier wins, except that a face that would start a second fan at a corner waits.
+    /// Two phases:
+    /// 1. Faces in priority order, each as [`HalfedgeMesh::add_face`] would take it; a face
+    ///    refused only because a corner has a fan it does not touch by an edge waits, and
+    ///    is retried (still in priority order) each time a face is added at that corner.
+    /// 2. Waiting faces can block each other for good: B waits at vertex v until D gives
+    ///    it an edge there, while D waits at w for B (the smallest case is in the tests).
+    ///    Then the first waiting face that some other waiting face could join is forced
+    ///    in, starting a second fan at its corner, and phase 1 resumes; a face may now
+    ///    also join two fans of a vertex. When nothing can be forced any more, every vertex
+    ///    must have one fan again. Where one has more, the fan holding its oldest face
+    ///    stays and the faces of its other fans (all from phase 2) are taken back; phase 2
+    ///    restarts from the end of phase 1 without them. After [`FORCE_ROUNDS`] rounds it
+    ///    forces nothing, which leaves phase 1's mesh.
+    /// 3. The faces taken back are offered again as in phase 1 (what they conflicted with
+    ///    may have gone too).
+    ///
+    /// So phase 2 only adds faces to what phase 1 inserted, phase 1 inserts what
+    /// face-by-face insertion with waiting does, and no refused face fits the final mesh
+    /// (`add_face` refuses it). Faces still waiting at the end are refused with
+    /// [`RefusalKind::SecondFan`].
     pub fn insert_faces(&mut self, faces: &[[u32; 4]], order: &[usize]) -> InsertOutcome {
-        let mut out = InsertOutcome { inserted: vec![None; faces.len()], refused: Vec::new() };
-        // Heap of ranks (smallest rank first); a rank may be pushed again after deferral.
-        let mut heap: BinaryHeap<std::cmp::Reverse<usize>> =
-            (0..order.len()).filter(|&r| order[r] < faces.len()).map(std::cmp::Reverse).collect();
-        let mut waiting: HashMap<u32, Vec<usize>> = HashMap::new();
-        let mut deferred: HashMap<usize, Refusal> = HashMap::new();
-        let mut done = vec![false; order.len()];
-        while let Some(std::cmp::Reverse(r)) = heap.pop() {
-            if done[r] {
-                continue;
-            }
-            let i = order[r];
-            let vs = faces[i].map(VertexId);
-            match self.try_add_face(vs) {
-                Ok(f) => {
-                    done[r] = true;
-                    deferred.remove(&r);
-                    out.inserted[i] = Some(f);
-                    for v in faces[i] {
-                        if let Some(list) = waiting.remove(&v) {
-                            heap.extend(list.into_iter().filter(|&q| !done[q]).map(std::cmp::Reverse));
-                        }
-                    }
+        let mut run = Batch {
+            heap: (0..order.len()).filter(|&r| order[r] < faces.len()).map(Reverse).collect(),
+            waiting: HashMap::new(),
+            deferred: BTreeMap::new(),
+            done: vec![false; order.len()],
+            added: Vec::new(),
+            out: InsertOutcome { inserted: vec![None; faces.len()], refused: Vec::new() },
+        };
+        run.drain(self, faces, order);
+        let mut taken_back: BTreeSet<usize> = BTreeSet::new();
+        if !run.deferred.is_empty() {
+            let start = (self.clone(), run.clone());
+            let phase2 = run.added.len();
+            for round in 0..=FORCE_ROUNDS {
+                if round > 0 {
+                    (*self, run) = start.clone();
                 }
-                Err(refusal) => match refusal.kind {
-                    RefusalKind::SecondFan(v) => {
-                        waiting.entry(v.0).or_default().push(r);
-                        deferred.insert(r, refusal);
-                    }
-                    _ => {
-                        done[r] = true;
-                        deferred.remove(&r);
-                        out.refused.push((i, refusal));
-                    }
-                },
+                for &r in &taken_back {
+                    run.done[r] = true;
+                    run.deferred.remove(&r);
+                }
+                if round == FORCE_ROUNDS {
+                    break;
+                }
+                let forced = self.force_waiting(&mut run, faces, order);
+                let culprits = self.second_fans(&forced, &run.added[phase2..], faces, order);
+                if culprits.is_empty() {
+                    break;
+                }
+                taken_back.extend(culprits);
             }
         }
+        // Step 3: the faces taken back get a last pass as in phase 1.
+        for &r in &taken_back {
+            run.done[r] = false;
+            run.heap.push(Reverse(r));
+        }
+        run.drain(self, faces, order);
+        let Batch { deferred, mut out, .. } = run;
         let mut rest: Vec<(usize, Refusal)> = deferred.into_iter().collect();
         rest.sort_by_key(|(r, _)| *r);
         out.refused.extend(rest.into_iter().map(|(r, e)| (order[r], e)));
         out
     }
 
+    /// Phase 2 of [`HalfedgeMesh::insert_faces`]: while faces wait, forces the first in,
+    /// allowing it to start second fans, then resumes phase 1. Returns the forced ranks
+    /// with their faces.
+    ///
+    /// Only a face that could be joined is forced: at each corner where it would start a
+    /// fan, another waiting face must share one of its edges there (in a manifold, the
+    /// face across such an edge is waiting). Others stay waiting, to be refused at the
+    /// end: no face starts waiting in this phase, so a face without a partner never gets
+    /// one, and a wrong quad touching the surface at one vertex is not forced at all.
+    fn force_waiting(
+        &mut self,
+        run: &mut Batch,
+        faces: &[[u32; 4]],
+        order: &[usize],
+    ) -> Vec<(usize, FaceId)> {
+        let mut forced = Vec::new();
+        let mut by_corner: HashMap<u32, Vec<usize>> = HashMap::new();
+        for &r in run.deferred.keys() {
+            for v in faces[order[r]] {
+                by_corner.entry(v).or_default().push(r);
+            }
+        }
+        let mut next = 0;
+        while let Some((&r, _)) = run.deferred.range(next..).next() {
+            next = r + 1;
+            let i = order[r];
+            let vs = faces[i];
+            let joinable = (0..4).all(|k| {
+                let (u, v, w) = (vs[(k + 3) % 4], vs[k], vs[(k + 1) % 4]);
+                let starts_fan = self.v_out[v as usize].is_some()
+                    && self.find_halfedge(VertexId(u), VertexId(v)).is_none()
+                    && self.find_halfedge(VertexId(v), VertexId(w)).is_none();
+                !starts_fan
+                    || by_corner.get(&v).is_some_and(|list| {
+                        list.iter().any(|&g| {
+                            let fg = faces[order[g]];
+                            g != r
+                                && run.deferred.contains_key(&g)
+                                && (has_edge(fg, u, v) || has_edge(fg, v, w))
+                        })
+                    })
+            });
+            if !joinable {
+                continue;
+            }
+            match self.plan_face(vs.map(VertexId), true) {
+                Ok(plan) => {
+                    let f = self.apply_plan(plan);
+                    run.accept(r, i, f, faces);
+                    forced.push((r, f));
+                }
+                Err(refusal) => run.refuse(r, i, refusal),
+            }
+            run.drain(self, faces, order);
+        }
+        forced
+    }
+
+    /// After phase 2 (`forced` its forced faces, `added` all it inserted): the ranks of the
+    /// faces to take back. Fans multiply only at corners of forced faces. At such a corner
+    /// that holds several fans, the fan holding the vertex's oldest face stays: it holds
+    /// any face phase 1 put there. The faces of its other fans go, all of them at once (a
+    /// chain of wrong faces around the vertex would otherwise lose one face per round).
+    fn second_fans(
+        &self,
+        forced: &[(usize, FaceId)],
+        added: &[(usize, FaceId)],
+        faces: &[[u32; 4]],
+        order: &[usize],
+    ) -> BTreeSet<usize> {
+        let mut later_fans: HashSet<FaceId> = HashSet::new();
+        let mut seen: HashSet<u32> = HashSet::new();
+        for &(r, _) in forced {
+            for v in faces[order[r]] {
+                if !seen.insert(v) {
+                    continue;
+                }
+                let v = VertexId(v);
+                let starts: Vec<HalfedgeId> =
+                    self.vertex_outgoing(v).filter(|&h| self.is_boundary(h)).collect();
+                if starts.len() < 2 {
+                    continue;
+                }
+                // Face ids grow with insertion time.
+                let fans: Vec<Vec<FaceId>> = starts.iter().map(|&h| self.fan_faces(h)).collect();
+                let oldest = (0..fans.len())
+                    .min_by_key(|&k| fans[k].iter().min().copied())
+                    .expect("internal error: a vertex with two fans has a fan");
+                for (_, fan) in fans.into_iter().enumerate().filter(|&(k, _)| k != oldest) {
+                    later_fans.extend(fan);
+                }
+            }
+        }
+        added.iter().filter(|(_, f)| later_fans.contains(f)).map(|&(r, _)| r).collect()
+    }
+
     fn refuse(kind: RefusalKind, msg: String) -> std::result::Result<Plan, Refusal> {
         Err(Refusal { kind, msg })
     }
 
-    /// Every check of `add_face`, without mutating.
-    fn plan_face(&self, vs: [VertexId; 4]) -> std::result::Result<Plan, Refusal> {
+    /// Every check of `add_face`, without mutating. With `new_fan` (phase 2 of
+    /// `insert_faces`), a corner may start a second fan.
+    fn plan_face(&self, vs: [VertexId; 4], new_fan: bool) -> std::result::Result<Plan, Refusal> {
         let n = self.n_vertices();
         for v in vs {
             if v.idx() >= n {
@@ -449,13 +666,13 @@ impl HalfedgeMesh {
             }
         }
         // Edges: existing ones must have exactly one face; record the orientation each asks for.
-        let mut exists = [false; 4];
+        let mut exists = [None; 4];
         let mut forward: Vec<FaceId> = Vec::new();
         let mut reverse: Vec<FaceId> = Vec::new();
         for i in 0..4 {
             let (a, b) = (vs[i], vs[(i + 1) % 4]);
             let Some(h) = self.find_halfedge(a, b) else { continue };
-            exists[i] = true;
+            exists[i] = Some(h);
             match (self.face(h), self.face(h.opposite())) {
                 (Some(_), Some(_)) => {
                     return Self::refuse(
@@ -485,7 +702,7 @@ impl HalfedgeMesh {
                 );
             }
         }
-        // Vertices: the quad must attach to the single fan of each corner, or the corner is isolated.
+        // Vertices: the quad must attach to the fan of each corner, or the corner is isolated.
         for i in 0..4 {
             let v = vs[i];
             let Some(h) = self.v_out[v.idx()] else { continue };
@@ -495,14 +712,24 @@ impl HalfedgeMesh {
                     format!("{v} is interior (its faces already form a closed disk)"),
                 );
             }
-            let (e_in, e_out) = (exists[(i + 3) % 4], exists[i]);
-            if !e_in && !e_out {
-                return Self::refuse(
-                    RefusalKind::SecondFan(v),
-                    format!(
-                        "{v} already has a fan of faces the quad does not attach to (non-manifold vertex)"
-                    ),
-                );
+            match (exists[(i + 3) % 4], exists[i]) {
+                (None, None) if !new_fan => {
+                    return Self::refuse(
+                        RefusalKind::SecondFan(v),
+                        format!(
+                            "{v} already has a fan of faces the quad does not attach to (non-manifold vertex)"
+                        ),
+                    );
+                }
+                (Some(a), Some(b)) if self.closes_one_of_several_fans(v, a, b) => {
+                    return Self::refuse(
+                        RefusalKind::SecondFan(v),
+                        format!(
+                            "the quad would close a fan of {v} into a disk while {v} has another fan (non-manifold vertex)"
+                        ),
+                    );
+                }
+                _ => {}
             }
         }
         // Orientation: flip the smaller side when the neighbours disagree.
@@ -576,6 +803,52 @@ impl HalfedgeMesh {
         }
     }
 
+    /// Whether a quad whose edges at corner `v` are the existing edges of `a` and `b` (one
+    /// half-edge of each, either direction) would close one fan of `v` into a disk while
+    /// `v` holds another. Each edge has one face, so one boundary half-edge; where `v` has a
+    /// single fan those are its ends, the incoming one linked to the outgoing one. That
+    /// link also holds when the edges end two different fans that follow each other around
+    /// `v`, which the quad merely joins; only otherwise is the fan walked.
+    fn closes_one_of_several_fans(&self, v: VertexId, a: HalfedgeId, b: HalfedgeId) -> bool {
+        let free = |h: HalfedgeId| if self.is_boundary(h) { h } else { h.opposite() };
+        let (x, y) = (free(a), free(b));
+        let (b_in, b_out) = match (self.to_vertex(x) == v, self.to_vertex(y) == v) {
+            (true, false) => (x, y),
+            (false, true) => (y, x),
+            // Both enter (or both leave) v: two fans of opposite orientation, never one.
+            _ => return false,
+        };
+        self.next(b_in) != b_out && self.fan_end(b_out) == b_in
+    }
+
+    /// The boundary half-edge entering the vertex at the other end of the open fan that
+    /// starts with boundary half-edge `b_out` (leaving the vertex): walks the fan's faces.
+    fn fan_end(&self, b_out: HalfedgeId) -> HalfedgeId {
+        let mut t = b_out.opposite();
+        for _ in 0..self.he_to.len() {
+            let i = self.next(t).opposite();
+            if self.is_boundary(i) {
+                return i;
+            }
+            t = i;
+        }
+        panic!("internal error: the fan of {b_out} does not end (corrupt mesh)")
+    }
+
+    /// The faces of the open fan that starts with boundary half-edge `b_out`, in order.
+    fn fan_faces(&self, b_out: HalfedgeId) -> Vec<FaceId> {
+        let mut fan = Vec::new();
+        let mut t = b_out.opposite();
+        while let Some(f) = self.face(t) {
+            fan.push(f);
+            if fan.len() > self.f_he.len() {
+                panic!("internal error: the fan of {b_out} does not end (corrupt mesh)");
+            }
+            t = self.next(t).opposite();
+        }
+        fan
+    }
+
     fn new_edge(&mut self, a: VertexId, b: VertexId) -> HalfedgeId {
         let h = if let Some(e) = self.free_edges.pop() {
             let h = HalfedgeId(2 * e);
@@ -624,8 +897,9 @@ impl HalfedgeMesh {
 
     /// Reverses the orientation of the edge-connected patch `faces` (a whole component).
     /// Each edge's two half-edges swap roles: new next(opp x) = opp(prev x) and the face of
-    /// x moves to opp x; boundary loops of the patch reverse with it (they only link
-    /// half-edges of the patch, since every vertex has a single fan).
+    /// x moves to opp x; boundary loops of the patch reverse with it. They link only
+    /// half-edges of the patch, except (inside `insert_faces`) around a vertex whose fans
+    /// belong to the patch and to other components: there the fans are relinked afterwards.
     fn flip_patch(&mut self, faces: &[FaceId]) {
         let mut edges: Vec<usize> = Vec::new();
         let mut seen: HashSet<usize> = HashSet::new();
@@ -640,6 +914,26 @@ impl HalfedgeMesh {
         }
         verts.sort_unstable();
         verts.dedup();
+        // Vertices where a boundary half-edge of the patch links to one of another
+        // component: their fans, each as (incoming end, outgoing start, in the patch).
+        let mut mixed: Vec<(VertexId, Vec<FanEnds>)> = Vec::new();
+        for &e in &edges {
+            for x in [HalfedgeId(2 * e as u32), HalfedgeId(2 * e as u32 + 1)] {
+                if !self.is_boundary(x) || seen.contains(&self.next(x).edge()) {
+                    continue;
+                }
+                let v = self.to_vertex(x);
+                if mixed.iter().any(|(w, _)| *w == v) {
+                    continue;
+                }
+                let fans = self
+                    .vertex_outgoing(v)
+                    .filter(|&h| self.is_boundary(h))
+                    .map(|h| (self.fan_end(h), h, seen.contains(&h.edge())))
+                    .collect();
+                mixed.push((v, fans));
+            }
+        }
         // New vertex half-edges must be computed from the old links.
         let new_out: Vec<(VertexId, HalfedgeId)> = verts
             .iter()
@@ -662,6 +956,22 @@ impl HalfedgeMesh {
         }
         for (v, h) in new_out {
             self.v_out[v.idx()] = Some(h);
+        }
+        // A flipped fan's ends swap: its new outgoing start is the twin of its old incoming
+        // end, and the other way round. Link each fan's end to the next fan's start.
+        for (v, fans) in mixed {
+            let swap = |(b_in, b_out, flipped): FanEnds| {
+                if flipped {
+                    (b_out.opposite(), b_in.opposite())
+                } else {
+                    (b_in, b_out)
+                }
+            };
+            let ends: Vec<(HalfedgeId, HalfedgeId)> = fans.into_iter().map(swap).collect();
+            for k in 0..ends.len() {
+                self.link(ends[k].0, ends[(k + 1) % ends.len()].1);
+            }
+            self.v_out[v.idx()] = Some(ends[0].1);
         }
         for &f in faces {
             let h = self.f_he[f.idx()].expect("internal error: flipping a removed face");
@@ -689,22 +999,42 @@ impl HalfedgeMesh {
             }
         }
         // Boundary relinking at each corner v = q[i+1] between hs[i] (in) and hs[i+1] (out),
-        // reading the old links before writing any.
-        let mut links: Vec<(HalfedgeId, HalfedgeId)> = Vec::with_capacity(8);
+        // reading the old links before writing any. Every link made at corner v is a link
+        // at v (the next of a half-edge entering v, the prev of one leaving it), so corners
+        // do not disturb each other.
+        let mut links: Vec<(HalfedgeId, HalfedgeId)> = Vec::with_capacity(12);
         let mut outs: Vec<(VertexId, HalfedgeId)> = Vec::with_capacity(4);
         for i in 0..4 {
             let j = (i + 1) % 4;
             let (hin, hout, v) = (hs[i], hs[j], q[j]);
             match (is_new[i], is_new[j]) {
-                // Closing the fan: next(in) is already out.
-                (false, false) => {}
+                // Closing a fan, or joining two fans that follow each other around v:
+                // next(in) is already out.
+                (false, false) if self.next(hin) == hout => {}
+                // Joining fan A (ending with `hin`) to fan B (starting with `hout`) where
+                // other fans lie between them around v: those fans move after B.
+                (false, false) => {
+                    let (first, last) = (self.next(hin), self.prev(hout));
+                    let b_end = self.fan_end(hout);
+                    debug_assert!(b_end != hin, "internal error: closing one of several fans");
+                    links.push((b_end, first));
+                    links.push((last, self.next(b_end)));
+                }
                 (false, true) => links.push((hout.opposite(), self.next(hin))),
                 (true, false) => {
                     links.push((self.prev(hout), hin.opposite()));
                     outs.push((v, hin.opposite()));
                 }
+                // A new fan at v: alone, or (phase 2 of insert_faces) put into the cycle of
+                // v's fans before the fan that starts with v's stored half-edge.
                 (true, true) => {
-                    links.push((hout.opposite(), hin.opposite()));
+                    match self.v_out[v.idx()] {
+                        None => links.push((hout.opposite(), hin.opposite())),
+                        Some(b_out) => {
+                            links.push((self.prev(b_out), hin.opposite()));
+                            links.push((hout.opposite(), b_out));
+                        }
+                    }
                     outs.push((v, hin.opposite()));
                 }
             }
@@ -906,6 +1236,160 @@ mod tests {
         let err = m.add_face(q(0, 5, 4, 9)).unwrap_err().to_string();
         assert!(err.contains("non-orientable"), "{err}");
         assert_eq!(m, before);
+    }
+
+    /// The smallest case of faces waiting on each other (found by shrinking the voxel cage
+    /// of issue 3's failing property case): an L of four quads given in the order A, B,
+    /// C, D. B touches A only at vertex 0 until D is in; D touches C only at vertex 6
+    /// until B is in. Face by face, both wait for ever.
+    fn waiting_pair() -> Vec<[u32; 4]> {
+        vec![[0, 1, 2, 3], [4, 5, 6, 0], [7, 8, 6, 5], [0, 6, 9, 1]]
+    }
+
+    #[test]
+    fn faces_waiting_on_each_other_go_in() {
+        let quads = waiting_pair();
+        let mut m = HalfedgeMesh::new(10);
+        m.add_face(q(0, 1, 2, 3)).unwrap();
+        m.add_face(q(7, 8, 6, 5)).unwrap();
+        for (f, v) in [(quads[1], 0), (quads[3], 6)] {
+            let r = m.try_add_face(f.map(VertexId)).unwrap_err();
+            assert_eq!(r.kind, RefusalKind::SecondFan(VertexId(v)), "{}", r.msg);
+        }
+        for order in [[0, 1, 2, 3], [0, 2, 1, 3], [0, 2, 3, 1], [2, 0, 3, 1]] {
+            let mut m = HalfedgeMesh::new(10);
+            let out = m.insert_faces(&quads, &order);
+            assert!(out.refused.is_empty(), "{order:?}: {:?}", out.refused);
+            assert!(out.inserted.iter().all(|f| f.is_some()));
+            validate(&m).unwrap();
+            assert_eq!(m.boundary_loops().len(), 1);
+        }
+    }
+
+    #[test]
+    fn a_face_that_leaves_a_second_fan_is_refused_and_the_rest_kept() {
+        // A bowtie: the second quad only touches the first at vertex 0.
+        let mut m = HalfedgeMesh::new(7);
+        let out = m.insert_faces(&[[0, 1, 2, 3], [0, 4, 5, 6]], &[0, 1]);
+        assert_eq!(out.refused.len(), 1);
+        assert_eq!((out.refused[0].0, out.refused[0].1.kind), (1, RefusalKind::SecondFan(VertexId(0))));
+        assert!(out.refused[0].1.msg.contains("vertex 0"), "{}", out.refused[0].1.msg);
+        validate(&m).unwrap();
+        assert_eq!(m.n_faces(), 1);
+        // The waiting pair with two wrong quads W1, W2 at vertex 0 (sharing an edge, so
+        // each could join the other), ahead of B and D: W1 is forced first, W2 joins it,
+        // and their fan at 0 stays apart from the true one, so both are taken back; the
+        // four true faces stay. Alone, W1 would not even be forced (nothing could join it).
+        for with_w2 in [true, false] {
+            let mut quads = waiting_pair();
+            quads.push([0, 10, 11, 12]);
+            quads.push([0, 12, 13, 14]);
+            let order: &[usize] = if with_w2 { &[0, 4, 5, 1, 2, 3] } else { &[0, 4, 1, 2, 3] };
+            let mut m = HalfedgeMesh::new(15);
+            let out = m.insert_faces(&quads, order);
+            let n_wrong = if with_w2 { 2 } else { 1 };
+            assert_eq!(out.refused.len(), n_wrong, "{:?}", out.refused);
+            for (k, (i, r)) in out.refused.iter().enumerate() {
+                assert_eq!((*i, r.kind), (4 + k, RefusalKind::SecondFan(VertexId(0))), "{}", r.msg);
+            }
+            validate(&m).unwrap();
+            assert!(out.inserted[..4].iter().all(|f| f.is_some()));
+            // Nothing refused fits the result.
+            let before = m.clone();
+            for (i, _) in &out.refused {
+                assert!(m.add_face(quads[*i].map(VertexId)).is_err());
+            }
+            assert_eq!(m, before);
+        }
+    }
+
+    /// Forces `vs` in as phase 2 does (a corner may start a second fan).
+    fn force(m: &mut HalfedgeMesh, vs: [VertexId; 4]) -> std::result::Result<FaceId, Refusal> {
+        let plan = m.plan_face(vs, true)?;
+        let f = m.apply_plan(plan);
+        crate::mesh::validate::validate_with_several_fans(m).unwrap();
+        Ok(f)
+    }
+
+    #[test]
+    fn fans_are_joined_around_other_fans_and_never_closed_beside_one() {
+        // The 2×2 grid around vertex 4, and a quad W = (4, 9, 10, 11) touching it at 4.
+        let mut m = HalfedgeMesh::new(12);
+        m.add_face(q(0, 1, 4, 3)).unwrap();
+        force(&mut m, q(4, 9, 10, 11)).unwrap();
+        // (4, 5, 8, 7) opposite, reversed: a third fan at 4, of the other orientation.
+        force(&mut m, q(4, 7, 8, 5)).unwrap();
+        assert_eq!(m.vertex_outgoing(VertexId(4)).filter(|&h| m.is_boundary(h)).count(), 3);
+        // (1, 2, 5, 4) joins the first and third fans, which W separates in the cycle
+        // around 4, and one of them is flipped to agree with the other.
+        m.add_face(q(1, 2, 5, 4)).unwrap();
+        crate::mesh::validate::validate_with_several_fans(&m).unwrap();
+        assert_eq!(m.vertex_outgoing(VertexId(4)).filter(|&h| m.is_boundary(h)).count(), 2);
+        // (3, 4, 7, 6) would close that fan into a disk while W's fan remains.
+        let after = m.clone();
+        for new_fan in [false, true] {
+            let r = m.plan_face(q(3, 4, 7, 6), new_fan).map(|_| ()).unwrap_err();
+            assert_eq!(r.kind, RefusalKind::SecondFan(VertexId(4)), "{}", r.msg);
+            assert!(r.msg.contains("close"), "{}", r.msg);
+        }
+        assert_eq!(m, after);
+        // Without W the same faces build the grid.
+        let mut m = HalfedgeMesh::new(12);
+        m.add_face(q(0, 1, 4, 3)).unwrap();
+        force(&mut m, q(4, 7, 8, 5)).unwrap();
+        m.add_face(q(1, 2, 5, 4)).unwrap();
+        m.add_face(q(3, 4, 7, 6)).unwrap();
+        validate(&m).unwrap();
+    }
+
+    #[test]
+    fn forcing_every_face_keeps_the_fan_cycles_consistent() {
+        // Every face of closed and open shapes in random order and orientation, each one
+        // forced (so vertices collect several fans, of both orientations, that later faces
+        // join and patches that get flipped): every step keeps the links consistent, no
+        // face is refused, and the end is the valid, consistently oriented mesh.
+        use crate::mesh::shapes;
+        use crate::rng::Rng;
+        let mut rng = Rng::new(4);
+        let mut meshes: Vec<(usize, Vec<[u32; 4]>)> = Vec::new();
+        for qm in [
+            shapes::grid(4, 3, 1.0, 1.0),
+            shapes::cube_sphere(3),
+            shapes::torus(6, 5, 2.0, 0.7),
+            shapes::cylinder(6, 3, 1.0, 1.0, false),
+            shapes::voxel_cage(&mut rng, [4, 4, 2], 0.5),
+            shapes::voxel_cage(&mut rng, [5, 5, 3], 0.5),
+            shapes::voxel_cage(&mut rng, [6, 4, 3], 0.5),
+        ] {
+            meshes.push((qm.vertices.len(), qm.quads));
+        }
+        // A sphere of 2k quads with two valence-k poles (0 and 1) around a ring r_i = 2 + i
+        // with middles m_i = 2 + k + i: many fans at once around a pole, so that joining
+        // two of them often has to move others.
+        for k in [6u32, 9, 12, 16] {
+            let (r, mid) = (|i: u32| 2 + i % k, |i: u32| 2 + k + i);
+            let top = (0..k).map(|i| [0, r(i), mid(i), r(i + 1)]);
+            let bottom = (0..k).map(|i| [1, r(i + 1), mid(i), r(i)]);
+            meshes.push((2 + 2 * k as usize, top.chain(bottom).collect()));
+        }
+        for (nv, quads) in &meshes {
+            for _ in 0..12 {
+                let mut m = HalfedgeMesh::new(*nv);
+                let mut order: Vec<usize> = (0..quads.len()).collect();
+                rng.shuffle(&mut order);
+                let mut made = vec![None; quads.len()];
+                for &i in &order {
+                    let f = quads[i];
+                    let f = if rng.below(2) == 0 { f } else { [f[0], f[3], f[2], f[1]] };
+                    made[i] = Some(force(&mut m, f.map(VertexId)).unwrap());
+                }
+                validate(&m).unwrap();
+                let agree = (0..quads.len())
+                    .filter(|&i| same_cycle(m.face_vertices(made[i].unwrap()), quads[i]))
+                    .count();
+                assert!(agree == 0 || agree == quads.len(), "{agree} of {}", quads.len());
+            }
+        }
     }
 
     #[test]

@@ -7,13 +7,27 @@
 //! DM=qm_hedgehog_spikes cargo run --release --example coverage_diagnostics -- mesh
 //! DPP=64 DR=0.05 cargo run --release --example coverage_diagnostics -- sweep
 //! [DDIR=/path/to/meshes] cargo run --release --example coverage_diagnostics -- losses
+//! FNORM=0 FVAR=1 FK=64 FV=12 FT=30 cargo run --release --example coverage_diagnostics -- far
+//! DM=qm_armadillo [DN=1] cargo run --release --example coverage_diagnostics -- ranks
+//! [DM=name] cargo run --release --example coverage_diagnostics -- normals
 //! ```
 //!
-//! `sweep` reads CandidateConfig overrides from DK, DPP, DR, DS, DWI1, DWI, DWL, DWS.
+//! `sweep` reads CandidateConfig overrides from DK, DPP, DR, DS, DWI1, DWI, DWL, DWS,
+//! DSN (min sine), DND (min normal dot), DNK (normal k), DSK (spacing k); DM limits it
+//! to the meshes whose name contains it.
 //! `losses` splits the ground-truth faces of each mesh (10% noise) into: not a
 //! candidate, candidate under the threshold, over it but dropped by the post-process,
 //! recovered; and the output's false positives by origin. Run it on the validation
 //! split of `train/` (never tune on `eval/`).
+//! `far` measures what proposals beyond the k nearest could reach: "direction-diverse"
+//! neighbours (of the FK nearest, by distance, each at least FT degrees from every
+//! one taken before, at most FV; FNORM=1 also requires normal agreement and a small
+//! elevation) and the ceilings of proposers that use them (C1: a corner with both
+//! edge neighbours in kNN ∪ diverse, the diagonal in one of theirs; A' with FVAR=1:
+//! a ∈ kNN(p), b diverse of p, x ∈ kNN(b); FVAR=2: all four edges in kNN ∪ diverse).
+//! `ranks` prints the proposer rank, score and inside count of the true faces the
+//! default budget drops. `normals` counts PCA normals more than 45° off the ground
+//! truth, and the missed faces that touch one.
 
 #[path = "../tests/common/candidates.rs"]
 mod cands_common;
@@ -163,8 +177,7 @@ fn envf(k: &str, d: f64) -> f64 {
     std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d)
 }
 
-fn sweep() {
-    let files = mesh_files("train").unwrap();
+fn cfg_from_env() -> CandidateConfig {
     let mut cfg = CandidateConfig::default();
     cfg.k = envf("DK", cfg.k as f64) as usize;
     cfg.per_point = envf("DPP", cfg.per_point as f64) as usize;
@@ -174,12 +187,23 @@ fn sweep() {
     cfg.w_inside = envf("DWI", cfg.w_inside as f64) as f32;
     cfg.w_length = envf("DWL", cfg.w_length as f64) as f32;
     cfg.w_shape = envf("DWS", cfg.w_shape as f64) as f32;
+    cfg.min_sine = envf("DSN", cfg.min_sine as f64) as f32;
+    cfg.min_normal_dot = envf("DND", cfg.min_normal_dot as f64) as f32;
+    cfg.normal_k = envf("DNK", cfg.normal_k as f64) as usize;
+    cfg.spacing_k = envf("DSK", cfg.spacing_k as f64) as usize;
+    cfg
+}
+
+fn sweep() {
+    let files = mesh_files("train").unwrap();
+    let cfg = cfg_from_env();
     let step = envf("DSTEP", 1.0) as usize;
+    let only = std::env::var("DM").unwrap_or_default();
     let mut out = String::new();
     for noisy in [false, true] {
         let mut all = Cov::default();
         let mut hh = Cov::default();
-        for path in files.iter().step_by(step) {
+        for path in files.iter().step_by(step).filter(|p| p.to_string_lossy().contains(&only)) {
             let mesh = load_quad_mesh(path);
             let pts = if noisy { noisy_cloud(&mesh, 1) } else { mesh.vertices.clone() };
             let (c, _) = coverage(&pts, &mesh.quads, &cfg);
@@ -293,12 +317,267 @@ fn losses() {
     println!("TOTAL gt {} notcand {:.4} lowp {:.4} lowp-in-out {:.4} highp-dropped {:.4} recall {:.4} | FP/gt {:.4} newvert {:.4} fill-noncand {:.4} predicted {:.4}", tot[0], r(tot[1]), r(tot[2]), r(tot[3]), r(tot[4]), r(tot[5]), r(tot[6]), r(tot[7]), r(tot[8]), r(tot[9]));
 }
 
+/// Visible neighbours of every point: among its `kf` nearest, by distance, those
+/// with an agreeing normal and a small elevation whose tangent direction is at least
+/// `theta` from every nearer accepted one, at most `v` of them.
+fn visible(local: &[[f32; 3]], normals: &[[f32; 3]], kf: usize, v: usize, cos_t: f32) -> Vec<Vec<u32>> {
+    let knn = knn_table(local, kf);
+    let use_normals = envf("FNORM", 1.0) > 0.0;
+    (0..local.len())
+        .map(|i| {
+            let (idx, _) = knn.row(i);
+            let n = normals[i];
+            let mut acc: Vec<(u32, [f32; 3])> = vec![];
+            for &j in idx {
+                if j as usize == i || acc.len() >= v {
+                    continue;
+                }
+                let q = local[j as usize];
+                let d = [q[0] - local[i][0], q[1] - local[i][1], q[2] - local[i][2]];
+                let dl = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                let nq = normals[j as usize];
+                if dl == 0.0 {
+                    continue;
+                }
+                if !use_normals {
+                    let t = [d[0] / dl, d[1] / dl, d[2] / dl];
+                    if acc.iter().all(|(_, r)| r[0] * t[0] + r[1] * t[1] + r[2] * t[2] < cos_t) {
+                        acc.push((j, t));
+                    }
+                    continue;
+                }
+                if n[0] * nq[0] + n[1] * nq[1] + n[2] * nq[2] < 0.5 {
+                    continue;
+                }
+                let e = d[0] * n[0] + d[1] * n[1] + d[2] * n[2];
+                if e.abs() > 0.5 * dl {
+                    continue;
+                }
+                let t = [d[0] - e * n[0], d[1] - e * n[1], d[2] - e * n[2]];
+                let tl = (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt();
+                let t = [t[0] / tl, t[1] / tl, t[2] / tl];
+                if acc.iter().all(|(_, r)| r[0] * t[0] + r[1] * t[1] + r[2] * t[2] < cos_t) {
+                    acc.push((j, t));
+                }
+            }
+            acc.into_iter().map(|(j, _)| j).collect()
+        })
+        .collect()
+}
+
+fn far_ceilings() {
+    let files = mesh_files("train").unwrap();
+    let cfg = CandidateConfig::default();
+    let kf = envf("FK", 64.0) as usize;
+    let v = envf("FV", 8.0) as usize;
+    let theta = envf("FT", 40.0) as f32;
+    let cos_t = theta.to_radians().cos();
+    for noisy in [false, true] {
+        let mut t = [0usize; 6];
+        let (mut sizes, mut npts) = (0usize, 0usize);
+        for path in &files {
+            let mesh = load_quad_mesh(path);
+            let pts = if noisy { noisy_cloud(&mesh, 1) } else { mesh.vertices.clone() };
+            let (_, c) = coverage(&pts, &mesh.quads, &cfg);
+            let have: HashSet<[u32; 4]> = c.quads.iter().map(key).collect();
+            let frame = point2quad::pipeline::frame::Frame::fit(&pts).unwrap();
+            let local = frame.to_local_all(&pts);
+            let n = local.len();
+            let knn = knn_table(&local, cfg.k);
+            let kn: Vec<HashSet<u32>> = (0..n).map(|i| kset(&knn, i, cfg.k).into_iter().collect()).collect();
+            let vis = visible(&local, &c.normals, kf, v, cos_t);
+
+            let vn: Vec<HashSet<u32>> = vis.iter().map(|x| x.iter().copied().collect()).collect();
+            let k12n = envf("FK12", 12.0) as usize;
+            let k12: Vec<HashSet<u32>> = (0..n).map(|i| kset(&knn, i, k12n).into_iter().collect()).collect();
+            sizes += (0..n).map(|i| k12[i].union(&vn[i]).count()).sum::<usize>();
+            npts += n;
+            let inn = |a: u32, b: u32| kn[a as usize].contains(&b) || vn[a as usize].contains(&b);
+            let edge = |a: u32, b: u32| inn(a, b) || inn(b, a);
+            let mut m = [0usize; 6];
+            for f in &mesh.quads {
+                m[0] += 1;
+                let covered = have.contains(&key(f));
+                m[1] += covered as usize;
+                let a = (0..4).any(|s| (1..4).all(|d| kn[f[s] as usize].contains(&f[(s + d) % 4])));
+                let b = (0..4).all(|s| edge(f[s], f[(s + 1) % 4]));
+                // proposer p with both edge neighbours in N(p), diagonal in N(a) ∪ N(b)
+                let c1 = (0..4).any(|s| {
+                    let (p, a, x, b) = (f[s], f[(s + 1) % 4], f[(s + 2) % 4], f[(s + 3) % 4]);
+                    inn(p, a) && inn(p, b) && (inn(a, x) || inn(b, x))
+                });
+                // V: (env FVAR) 1: a ∈ kNN(p), b ∈ VN(p), x ∈ kNN(b); 2: a, b ∈ N(p), x ∈ N(a) ∩ N(b)
+                let var = envf("FVAR", 2.0) as usize;
+                let vb = (0..4).any(|s| {
+                    (0..2).any(|dir| {
+                        let (p, mut a, x, mut b) = (f[s], f[(s + 1) % 4], f[(s + 2) % 4], f[(s + 3) % 4]);
+                        if dir == 1 {
+                            std::mem::swap(&mut a, &mut b);
+                        }
+                        match var {
+                            1 => {
+                                kn[p as usize].contains(&a)
+                                    && vn[p as usize].contains(&b)
+                                    && kn[b as usize].contains(&x)
+                            }
+                            _ => inn(p, a) && inn(p, b) && inn(a, x) && inn(b, x),
+                        }
+                    })
+                });
+                m[2] += a as usize;
+                m[3] += (a || b) as usize;
+                m[4] += (a || c1) as usize;
+                m[5] += (a || vb) as usize;
+            }
+            let r = |x: usize| x as f64 / m[0] as f64;
+            println!(
+                "{:28} {} cov {:.4} A {:.4} AorB' {:.4} AorC1 {:.4} A' {:.4}",
+                path.file_stem().unwrap().to_string_lossy(),
+                if noisy { "N" } else { "C" },
+                r(m[1]),
+                r(m[2]),
+                r(m[3]),
+                r(m[4]),
+                r(m[5])
+            );
+            for i in 0..6 {
+                t[i] += m[i];
+            }
+        }
+        let r = |x: usize| x as f64 / t[0] as f64;
+        println!(
+            "TOTAL {} FK {kf} FV {v} FT {theta} cov {:.4} A {:.4} AorB' {:.4} AorC1 {:.4} A' {:.4} (|N'| {:.1})",
+            if noisy { "N" } else { "C" },
+            r(t[1]),
+            r(t[2]),
+            r(t[3]),
+            r(t[4]),
+            r(t[5]),
+            sizes as f64 / npts as f64
+        );
+    }
+}
+
+/// Rank, score and inside count of the true faces that the default budget drops
+/// (DM = mesh name, DN = 1 for the noisy cloud).
+fn ranks() {
+    let name = std::env::var("DM").unwrap_or("qm_armadillo".into());
+    let files = mesh_files("train").unwrap();
+    let path = files.iter().find(|p| p.to_string_lossy().contains(&name)).unwrap();
+    let mesh = load_quad_mesh(path);
+    let pts = if envf("DN", 0.0) > 0.0 { noisy_cloud(&mesh, 1) } else { mesh.vertices.clone() };
+    let cfg = CandidateConfig::default();
+    let (_, c) = coverage(&pts, &mesh.quads, &cfg);
+    let have: HashSet<[u32; 4]> = c.quads.iter().map(key).collect();
+    let mut all = cfg.clone();
+    all.per_point = 100000;
+    let (_, ca) = coverage(&pts, &mesh.quads, &all);
+    let idx: std::collections::HashMap<[u32; 4], usize> =
+        ca.quads.iter().enumerate().map(|(i, q)| (key(q), i)).collect();
+    let mut hist = std::collections::BTreeMap::new();
+    let mut shown = 0;
+    let mut nins = [0usize; 4];
+    for f in &mesh.quads {
+        if have.contains(&key(f)) {
+            continue;
+        }
+        let Some(&i) = idx.get(&key(f)) else {
+            *hist.entry(99999).or_insert(0) += 1;
+            continue;
+        };
+        let r = ca.rank[i] as usize;
+        let b = [32, 48, 64, 96, 128, 256, 512, 99998].into_iter().find(|&b| r < b).unwrap();
+        *hist.entry(b).or_insert(0) += 1;
+        nins[(ca.inside[i] as usize).min(3)] += 1;
+        if shown < 12 {
+            shown += 1;
+            let l: Vec<f64> = (0..4)
+                .map(|s| {
+                    let a = pts[f[s] as usize];
+                    let b = pts[f[(s + 1) % 4] as usize];
+                    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+                })
+                .collect();
+            let sp: Vec<f32> = f.iter().map(|&v| ca.spacing[v as usize]).collect();
+            println!(
+                "missed rank {r} score {:.3} inside {} proposers {} len {:.3?} spacing {:.3?}",
+                ca.score[i], ca.inside[i], ca.proposers[i], l, sp
+            );
+        }
+    }
+    println!("{name}: rank histogram of missed (99999 = not proposable) {hist:?}; inside 0/1/2/3+ {nins:?}");
+}
+
+/// Share of points whose PCA normal is off the ground-truth vertex normal (area
+/// weighted face normals) by more than 45°, and how the missed faces split by it
+/// (DM = mesh name, all meshes when unset).
+fn normals_check() {
+    let only = std::env::var("DM").unwrap_or_default();
+    let cfg = cfg_from_env();
+    for path in mesh_files("train").unwrap().iter().filter(|p| p.to_string_lossy().contains(&only)) {
+        let mesh = load_quad_mesh(path);
+        let pts = mesh.vertices.clone();
+        let (_, c) = coverage(&pts, &mesh.quads, &cfg);
+        let have: HashSet<[u32; 4]> = c.quads.iter().map(key).collect();
+        let mut gn = vec![[0.0f64; 3]; pts.len()];
+        for f in &mesh.quads {
+            let d1: Vec<f64> = (0..3).map(|a| pts[f[2] as usize][a] - pts[f[0] as usize][a]).collect();
+            let d2: Vec<f64> = (0..3).map(|a| pts[f[3] as usize][a] - pts[f[1] as usize][a]).collect();
+            let n =
+                [d1[1] * d2[2] - d1[2] * d2[1], d1[2] * d2[0] - d1[0] * d2[2], d1[0] * d2[1] - d1[1] * d2[0]];
+            for &v in f {
+                for a in 0..3 {
+                    gn[v as usize][a] += n[a];
+                }
+            }
+        }
+        // The frame is a similarity: map the GT normal's tip through it and compare
+        // directions (|cos|, the PCA sign is not the point here).
+        let frame = point2quad::pipeline::frame::Frame::fit(&pts).unwrap();
+        let bad: Vec<bool> = (0..pts.len())
+            .map(|i| {
+                let g = [pts[i][0] + gn[i][0], pts[i][1] + gn[i][1], pts[i][2] + gn[i][2]];
+                let gl = frame.to_local_all(&[g, pts[i]]);
+                let d = [
+                    (gl[0][0] - gl[1][0]) as f64,
+                    (gl[0][1] - gl[1][1]) as f64,
+                    (gl[0][2] - gl[1][2]) as f64,
+                ];
+                let dl = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                let n = c.normals[i];
+                dl == 0.0
+                    || ((d[0] * n[0] as f64 + d[1] * n[1] as f64 + d[2] * n[2] as f64) / dl).abs()
+                        < std::f64::consts::FRAC_1_SQRT_2
+            })
+            .collect();
+        let nb = bad.iter().filter(|&&b| b).count();
+        let (mut missed, mut missed_bad) = (0, 0);
+        for f in &mesh.quads {
+            if !have.contains(&key(f)) {
+                missed += 1;
+                missed_bad += f.iter().any(|&v| bad[v as usize]) as usize;
+            }
+        }
+        println!(
+            "{:28} points {} bad normals {:.4} | missed faces {} of which with a bad-normal corner {}",
+            path.file_stem().unwrap().to_string_lossy(),
+            pts.len(),
+            nb as f64 / pts.len() as f64,
+            missed,
+            missed_bad
+        );
+    }
+}
+
 fn main() {
     match std::env::args().nth(1).as_deref() {
         Some("ceilings") => ceilings(),
         Some("mesh") => one_mesh(),
         Some("sweep") => sweep(),
         Some("losses") => losses(),
+        Some("far") => far_ceilings(),
+        Some("ranks") => ranks(),
+        Some("normals") => normals_check(),
         _ => eprintln!("usage: coverage_diagnostics ceilings|mesh|sweep|losses (see the file header)"),
     }
 }

@@ -25,12 +25,11 @@
 
 use crate::error::{Error, Result};
 use crate::math::{mat_vec, to_f32};
-use crate::pipeline::candidates::{knn_table, neighbours, CandidateConfig};
+use crate::pipeline::candidates::{knn_table, neighbours, normal_rows, CandidateConfig};
 use crate::pipeline::dataset::Sample;
 use crate::pipeline::features::{self, F_INFO_DIM};
 use crate::pipeline::normals::{estimate_normals, orient_normals, pca_normal};
 use crate::rng::Rng;
-use crate::spatial::kdtree::KnnTable;
 
 /// What augmenting a sample needs that never changes between steps: the kNN rows of
 /// its normals and spacing, its oriented normals and spacing, and which points are
@@ -98,18 +97,8 @@ impl SampleGeometry {
         // on k: rows are ordered by (distance, index)), then its normal table.
         let k = cfg.k.max(cfg.normal_k).max(cfg.spacing_k).max(3);
         let knn = knn_table(points, k);
-        let w = knn.indices.len().checked_div(n).unwrap_or(0);
-        let normal_w = (cfg.normal_k + 1).min(w);
-        let mut table = KnnTable {
-            k: normal_w,
-            n_queries: n,
-            indices: Vec::with_capacity(n * normal_w),
-            dist_sq: Vec::with_capacity(n * normal_w),
-        };
-        for i in 0..n {
-            table.indices.extend_from_slice(&knn.indices[i * w..i * w + normal_w]);
-            table.dist_sq.extend_from_slice(&knn.dist_sq[i * w..i * w + normal_w]);
-        }
+        let table = normal_rows(&knn, n, cfg.normal_k);
+        let normal_w = table.k;
         let mut normals = estimate_normals(points, &table);
         orient_normals(points, &table, &mut normals);
         // Spacing neighbours: the first `spacing_k` distinct points of each row.

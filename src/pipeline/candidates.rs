@@ -191,6 +191,25 @@ pub fn knn_table(points: &[[f32; 3]], k: usize) -> KnnTable {
     KdTree::build(points).knn_batch(points, k + 1)
 }
 
+/// The first `normal_k + 1` columns of every row of `knn` (the point itself and its
+/// `normal_k` nearest): the neighbourhoods of the PCA normals. Training's augmentation
+/// rebuilds the normals over the very same rows.
+pub(crate) fn normal_rows(knn: &KnnTable, n: usize, normal_k: usize) -> KnnTable {
+    let w = knn.indices.len().checked_div(n).unwrap_or(0);
+    let nk = (normal_k + 1).min(w);
+    let mut t = KnnTable {
+        k: nk,
+        n_queries: n,
+        indices: Vec::with_capacity(n * nk),
+        dist_sq: Vec::with_capacity(n * nk),
+    };
+    for i in 0..n {
+        t.indices.extend_from_slice(&knn.indices[i * w..i * w + nk]);
+        t.dist_sq.extend_from_slice(&knn.dist_sq[i * w..i * w + nk]);
+    }
+    t
+}
+
 /// Point `i`'s neighbours from a table row: the point itself removed, at most `k`.
 #[inline]
 pub(crate) fn neighbours(knn: &KnnTable, n: usize, i: usize, k: usize) -> impl Iterator<Item = u32> + '_ {
@@ -857,22 +876,8 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
     let k = cfg.k.max(cfg.normal_k).max(cfg.spacing_k).max(3);
     let knn = knn_table(points, k);
 
-    let w = knn.indices.len() / n;
     // PCA on the point itself and its `normal_k` nearest.
-    let normal_table = {
-        let nk = (cfg.normal_k + 1).min(w);
-        let mut t = KnnTable {
-            k: nk,
-            n_queries: n,
-            indices: Vec::with_capacity(n * nk),
-            dist_sq: Vec::with_capacity(n * nk),
-        };
-        for i in 0..n {
-            t.indices.extend_from_slice(&knn.indices[i * w..i * w + nk]);
-            t.dist_sq.extend_from_slice(&knn.dist_sq[i * w..i * w + nk]);
-        }
-        t
-    };
+    let normal_table = normal_rows(&knn, n, cfg.normal_k);
     let mut normals = estimate_normals(points, &normal_table);
     orient_normals(points, &normal_table, &mut normals);
     let spacing = local_spacing(points, &knn, cfg.spacing_k);

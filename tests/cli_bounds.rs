@@ -1,5 +1,5 @@
 //! Upper bounds on the numeric CLI options that size work (`candidates --k/--per-point`,
-//! `reconstruct --k`, `dataset --synthetic`): the bound itself is accepted, one past it
+//! `reconstruct --k`, `dataset --synthetic`, `train --epochs`): the bound itself is accepted, one past it
 //! (and a 20-digit value) is a usage error (exit 2) naming the option, the bounds and the
 //! value, before any file is read or written.
 
@@ -59,6 +59,16 @@ fn work_sizing_options_are_bounded() {
             vec!["dataset", "--out", &ds, "--synthetic", "100001"],
             "--synthetic must be between 0 and 100000",
             "100001",
+        ),
+        (
+            vec!["train", "--data", &ds, "--out", &mesh, "--epochs", "100001"],
+            "--epochs must be between 1 and 100000",
+            "100001",
+        ),
+        (
+            vec!["train", "--data", &ds, "--out", &mesh, "--epochs", "0"],
+            "--epochs must be between 1 and 100000",
+            "0",
         ),
         (
             vec!["dataset", "--out", &ds, "--synthetic", huge],

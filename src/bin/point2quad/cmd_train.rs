@@ -39,7 +39,7 @@ OPTIONS:
                             paper       the paper's widths and KPFCNN (25.2M
                                         parameters; slow on a CPU)
                           (ignored with --resume: the checkpoint holds its config)
-    --epochs N            total epochs (a resumed run continues up to N) [40]
+    --epochs N            total epochs, 1..100000 (a resumed run continues up to N) [40]
     --resume CKPT         continue exactly from a MODEL.ckpt written earlier
     --seed S              training seed [0]
     --lr X                initial learning rate [0.01]
@@ -152,7 +152,8 @@ pub fn run(argv: &[String]) -> Result<()> {
     a.expect_positional(cmd, 0, "no positional arguments")?;
     let data = PathBuf::from(a.required(cmd, "--data")?);
     let out = PathBuf::from(a.required(cmd, "--out")?);
-    let mut cfg = TrainConfig { epochs: a.parsed(cmd, "--epochs", 40usize)?, ..TrainConfig::default() };
+    let epochs = a.parsed_in(cmd, "--epochs", 40usize, 1, 100_000, "total epochs")?;
+    let mut cfg = TrainConfig { epochs, ..TrainConfig::default() };
     cfg.seed = a.parsed(cmd, "--seed", 0u64)?;
     cfg.sgd.lr = a.parsed(cmd, "--lr", cfg.sgd.lr)?;
     cfg.max_candidates = a.parsed(cmd, "--max-candidates", cfg.max_candidates)?;

@@ -25,7 +25,9 @@
 
 use crate::error::{Error, Result};
 use crate::math::{mat_vec, to_f32};
-use crate::pipeline::candidates::{knn_table, neighbours, normal_rows, CandidateConfig};
+use crate::pipeline::candidates::{
+    fill_missing_spacing, knn_table, neighbours, normal_rows, CandidateConfig,
+};
 use crate::pipeline::dataset::Sample;
 use crate::pipeline::features::{self, F_INFO_DIM};
 use crate::pipeline::normals::{estimate_normals, orient_normals, pca_normal};
@@ -53,17 +55,6 @@ pub struct SampleGeometry {
     corners: Vec<u32>,
 }
 
-/// Median of the positive finite values of `s`, or 1 when there is none.
-fn spacing_fallback(s: &[f32]) -> f32 {
-    let mut ok: Vec<f32> = s.iter().copied().filter(|x| x.is_finite() && *x > 0.0).collect();
-    if ok.is_empty() {
-        return 1.0;
-    }
-    let m = ok.len() / 2;
-    *ok.select_nth_unstable_by(m, f32::total_cmp).1
-}
-
-/// `|a − b|` in f32, the expression candidate generation uses for distances.
 #[inline]
 fn dist(a: [f32; 3], b: [f32; 3]) -> f32 {
     let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
@@ -174,12 +165,7 @@ impl SampleGeometry {
                 sum / c as f32
             }
         });
-        let fallback = spacing_fallback(&s);
-        for x in &mut s {
-            if !(x.is_finite() && *x > 0.0) {
-                *x = fallback;
-            }
-        }
+        fill_missing_spacing(&mut s);
         s
     }
 

@@ -240,6 +240,14 @@ fn local_spacing(points: &[[f32; 3]], knn: &KnnTable, spacing_k: usize) -> Vec<f
             sum / c as f32
         }
     });
+    fill_missing_spacing(&mut s);
+    s
+}
+
+/// Replaces every spacing that is not a positive finite number (a point with no
+/// distinct neighbour) by the median of the others, or 1 when there is none. Shared
+/// with training's augmentation, which recomputes spacing for moved points.
+pub(crate) fn fill_missing_spacing(s: &mut [f32]) {
     let mut ok: Vec<f32> = s.iter().copied().filter(|x| x.is_finite() && *x > 0.0).collect();
     let fallback = if ok.is_empty() {
         1.0
@@ -247,12 +255,11 @@ fn local_spacing(points: &[[f32; 3]], knn: &KnnTable, spacing_k: usize) -> Vec<f
         let m = ok.len() / 2;
         *ok.select_nth_unstable_by(m, f32::total_cmp).1
     };
-    for x in &mut s {
+    for x in s.iter_mut() {
         if !(x.is_finite() && *x > 0.0) {
             *x = fallback;
         }
     }
-    s
 }
 
 /// Geometry of one ordered quad, shared by ranking and features.

@@ -467,23 +467,29 @@ impl KdTree {
         }
     }
 
-    /// Offers every point of leaf `leaf` to the sorted key buffer `best`.
+    /// The squared distances from `q` to the slots of leaf `leaf`, the mask of the slots
+    /// within `bound` (`<=`; padding is NaN and never compares), and the leaf's indices.
+    /// Distances and mask are built in loops the compiler vectorises, so that callers
+    /// look only at the (few) candidates one by one.
     #[inline(always)]
-    fn scan_leaf_knn(&self, leaf: usize, q: &[f32; 3], best: &mut [u64], filled: &mut usize) {
+    fn leaf_within(&self, leaf: usize, q: &[f32; 3], bound: f32) -> ([f32; SLOT_MAX], u32, &[u32]) {
         let (s, e) = (leaf * self.slot, (leaf + 1) * self.slot);
-        let last = best.len() - 1;
-        // Distances, then the mask of those within the k-th distance, in loops the compiler
-        // vectorises; then only the (few) candidates are looked at one by one.
         let mut ds = [f32::NAN; SLOT_MAX];
         for (((d, &x), &y), &z) in ds.iter_mut().zip(&self.xs[s..e]).zip(&self.ys[s..e]).zip(&self.zs[s..e]) {
             *d = dist_sq(*q, [x, y, z]);
         }
-        let worst_d = kth_dist(best[last]);
         let mut mask = 0u32;
         for (&d, &bit) in ds.iter().zip(&BITS) {
-            mask |= if d <= worst_d { bit } else { 0 };
+            mask |= if d <= bound { bit } else { 0 };
         }
-        let ids = &self.idx[s..e];
+        (ds, mask, &self.idx[s..e])
+    }
+
+    /// Offers every point of leaf `leaf` to the sorted key buffer `best`.
+    #[inline(always)]
+    fn scan_leaf_knn(&self, leaf: usize, q: &[f32; 3], best: &mut [u64], filled: &mut usize) {
+        let last = best.len() - 1;
+        let (ds, mut mask, ids) = self.leaf_within(leaf, q, kth_dist(best[last]));
         while mask != 0 {
             let j = mask.trailing_zeros() as usize;
             mask &= mask - 1;
@@ -504,17 +510,7 @@ impl KdTree {
     /// Pushes the points of leaf `leaf` within `radius_sq` of `q` to `out`.
     #[inline(always)]
     fn scan_leaf_radius(&self, leaf: usize, q: &[f32; 3], radius_sq: f32, out: &mut Vec<Neighbor>) {
-        let (s, e) = (leaf * self.slot, (leaf + 1) * self.slot);
-        let mut ds = [f32::NAN; SLOT_MAX];
-        for (((d, &x), &y), &z) in ds.iter_mut().zip(&self.xs[s..e]).zip(&self.ys[s..e]).zip(&self.zs[s..e]) {
-            *d = dist_sq(*q, [x, y, z]);
-        }
-        // Padding is NaN: its distance never compares `<=`.
-        let mut mask = 0u32;
-        for (&d, &bit) in ds.iter().zip(&BITS) {
-            mask |= if d <= radius_sq { bit } else { 0 };
-        }
-        let ids = &self.idx[s..e];
+        let (ds, mut mask, ids) = self.leaf_within(leaf, q, radius_sq);
         while mask != 0 {
             let j = mask.trailing_zeros() as usize;
             mask &= mask - 1;

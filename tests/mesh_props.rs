@@ -9,7 +9,7 @@ use common::*;
 use point2quad::mesh::halfedge::{HalfedgeMesh, RefusalKind};
 use point2quad::mesh::handles::{FaceId, VertexId};
 use point2quad::mesh::hole_fill::{fill_holes, HoleFillConfig};
-use point2quad::mesh::postprocess::{postprocess, PostprocessConfig};
+use point2quad::mesh::postprocess::{postprocess, support_priority, PostprocessConfig};
 use point2quad::mesh::validate::validate;
 use point2quad::rng::Rng;
 use proptest::prelude::*;
@@ -201,12 +201,17 @@ proptest! {
     /// Random soups through the whole post-process: always a valid, pure-quad, oriented
     /// manifold whose first vertices are the input positions, bit for bit.
     #[test]
-    fn postprocess_of_random_soups_is_a_valid_mesh(seed in any::<u64>(), drop in 0.0f64..0.3, limit in prop::sample::select(vec![2u32, 10])) {
+    fn postprocess_of_random_soups_is_a_valid_mesh(
+        seed in any::<u64>(),
+        drop in 0.0f64..0.3,
+        limit in prop::sample::select(vec![2u32, 10]),
+        support in prop::sample::select(vec![0.0f32, 2.0]),
+    ) {
         let mut rng = Rng::new(seed);
         for m in suite() {
             let wrong = 1 + rng.below(m.quads.len());
             let (faces, probs) = random_soup(&m, &mut rng, drop, wrong);
-            let cfg = PostprocessConfig { score_limit: limit, ..Default::default() };
+            let cfg = PostprocessConfig { score_limit: limit, support_weight: support, ..Default::default() };
             let (qm, rep) = postprocess(&m.positions, &faces, &probs, &cfg).unwrap();
             prop_assert_eq!(&qm.vertices[..m.positions.len()], &m.positions[..]);
             for (a, b) in qm.vertices.iter().zip(&m.positions) {
@@ -218,6 +223,36 @@ proptest! {
             prop_assert_eq!(rep.faces_out, qm.quads.len());
             prop_assert_eq!(rep.faces_in, faces.len());
             prop_assert!(rep.inserted + rep.refused_on_insertion + rep.removed_by_score + rep.degenerate + rep.zero_area == faces.len());
+        }
+    }
+
+    /// The insertion priority with edge support equals a brute-force reference: for
+    /// each face, each of its directed edges (a, b), the best probability among the
+    /// other kept faces that run b → a, averaged over the four edges.
+    #[test]
+    fn support_priority_matches_brute_force(seed in any::<u64>(), w in 0.0f32..4.0) {
+        let mut rng = Rng::new(seed);
+        for m in suite() {
+            let wrong = 1 + rng.below(m.quads.len());
+            let (faces, probs) = random_soup(&m, &mut rng, 0.1, wrong);
+            let keep: Vec<bool> = faces.iter().map(|_| rng.f64() < 0.9).collect();
+            let got = support_priority(&faces, &probs, &keep, w);
+            for (f, q) in faces.iter().enumerate() {
+                let mut sum = 0.0f32;
+                for i in 0..4 {
+                    let (a, b) = (q[i], q[(i + 1) % 4]);
+                    let mut best = 0.0f32;
+                    for (g, r) in faces.iter().enumerate() {
+                        let runs_ba = (0..4).any(|j| r[j] == b && r[(j + 1) % 4] == a);
+                        if g != f && keep[g] && runs_ba && a != b {
+                            best = best.max(probs[g]);
+                        }
+                    }
+                    sum += best;
+                }
+                let want = probs[f] + w * sum / 4.0;
+                prop_assert!((got[f] - want).abs() <= 1e-6 * (1.0 + want.abs()), "face {} {:?}: {} vs {}", f, q, got[f], want);
+            }
         }
     }
 

@@ -12,7 +12,7 @@ use std::sync::OnceLock;
 use point2quad::pipeline::augment::{face_rows, Augmentation, SampleGeometry};
 use point2quad::pipeline::candidates::CandidateConfig;
 use point2quad::pipeline::dataset::{save_sample, Sample};
-use point2quad::pipeline::features::{CONTEXT_DIM, F_INFO_DIM};
+use point2quad::pipeline::features::{to_local_frame, CONTEXT_DIM, F_INFO_DIM};
 use point2quad::pipeline::model::{Model, ModelConfig};
 use point2quad::pipeline::train::{sample_input, train};
 use point2quad::rng::Rng;
@@ -103,6 +103,50 @@ fn geometry_of_bad_samples_is_an_error() {
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(32))]
+
+    /// F_info in the candidate's own frame (what `local_frame` models read) does not
+    /// change under a rotation of the cloud, while the cloud-frame rows do; and the
+    /// local row is a rotation of the cloud-frame one (the Gram matrix of its 4 offsets
+    /// and 4 corner normals is kept) that puts the first edge on +x in the xz-plane and
+    /// the diagonal normal on +z.
+    #[test]
+    fn local_frame_f_info_is_rotation_invariant(which in 0usize..3, seed in any::<u64>()) {
+        let (s, g) = &data()[which];
+        let aug = Augmentation::draw(&mut Rng::new(seed), true, None, 0.0, g.spacing()).unwrap();
+        let (mut got, _) = augmented(s, g, &aug, F_INFO_DIM);
+        let mut want = sample_input(s, F_INFO_DIM);
+        let moved_cols = got.iter().zip(&want).filter(|(a, b)| !close(**a, **b)).count();
+        prop_assert!(moved_cols > 0, "a random rotation left every cloud-frame value in place");
+        let vecs = |r: &[f32]| -> Vec<[f64; 3]> {
+            [0, 3, 6, 9, 17, 20, 23, 26].iter().map(|&c| [r[c] as f64, r[c + 1] as f64, r[c + 2] as f64]).collect()
+        };
+        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        for (gr, wr) in got.chunks_mut(F_INFO_DIM).zip(want.chunks_mut(F_INFO_DIM)) {
+            let before = vecs(wr);
+            let shape: Vec<f32> = wr[12..17].to_vec();
+            to_local_frame(gr);
+            to_local_frame(wr);
+            for (c, (a, b)) in gr.iter().zip(wr.iter()).enumerate() {
+                prop_assert!(close(*a, *b), "column {}: {} vs {}", c, a, b);
+            }
+            prop_assert_eq!(&wr[12..17], &shape[..]);
+            let after = vecs(wr);
+            let scale = before.iter().map(|v| dot(*v, *v)).fold(1.0f64, f64::max);
+            for i in 0..8 {
+                for j in 0..8 {
+                    let (x, y) = (dot(before[i], before[j]), dot(after[i], after[j]));
+                    prop_assert!((x - y).abs() <= 1e-4 * scale, "Gram ({}, {}): {} vs {}", i, j, x, y);
+                }
+            }
+            let p = &after[..4];
+            prop_assert!(p[1][1].abs() <= 1e-4 * scale.sqrt() && p[1][0] > 0.0, "first edge {:?}", p[1]);
+            let d1 = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
+            let d2 = [p[3][0] - p[1][0], p[3][1] - p[1][1], p[3][2] - p[1][2]];
+            let n = [d1[1] * d2[2] - d1[2] * d2[1], d1[2] * d2[0] - d1[0] * d2[2], d1[0] * d2[1] - d1[1] * d2[0]];
+            let l = dot(n, n).sqrt();
+            prop_assert!((n[0].abs() + n[1].abs()) <= 1e-4 * l && n[2] > 0.0, "diagonal normal {:?}", n);
+        }
+    }
 
     /// A uniform scale (through the random-frame path) leaves every column unchanged
     /// (up to f32 rounding) and scales every point's spacing by exactly that factor.

@@ -56,6 +56,45 @@ pub fn f_info_row(points: &[[f32; 3]], spacing: &[f32], q: [u32; 4], row: &mut [
     }
 }
 
+/// Expresses an F_info row (`row[..F_INFO_DIM]`, as [`f_info_row`] writes it) in the
+/// candidate's own frame instead of the cloud's: z = the diagonal normal
+/// normalize((p_2 − p_0) × (p_3 − p_1)), x = the first edge p_1 − p_0 made orthogonal to
+/// z, y = z × x. The corner offsets (columns 0–11) and the corner normals (17–28) are
+/// rotated into that frame; the Jacobian and the sines are invariant already. The row
+/// then no longer changes under a rotation of the cloud, so the network need not learn
+/// rotation invariance from augmentation (DESIGN §2 allows stating another choice of
+/// coordinates; `ModelConfig::local_frame` selects it). A row whose diagonals or first
+/// edge are degenerate (never produced by `generate`) is left as it is.
+///
+/// # Panics
+/// If `row` is shorter than [`F_INFO_DIM`].
+pub fn to_local_frame(row: &mut [f32]) {
+    let pos: [[f32; 3]; 4] = std::array::from_fn(|i| [row[3 * i], row[3 * i + 1], row[3 * i + 2]]);
+    let p = |i: usize| pos[i];
+    let sub = |a: [f32; 3], b: [f32; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let cross = |a: [f32; 3], b: [f32; 3]| {
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    };
+    let unit = |a: [f32; 3]| {
+        let l = dot(a, a).sqrt();
+        (l > 1e-12 && l.is_finite()).then(|| [a[0] / l, a[1] / l, a[2] / l])
+    };
+    let Some(z) = unit(cross(sub(p(2), p(0)), sub(p(3), p(1)))) else { return };
+    let e = sub(p(1), p(0));
+    let ez = dot(e, z);
+    let Some(x) = unit([e[0] - ez * z[0], e[1] - ez * z[1], e[2] - ez * z[2]]) else { return };
+    let y = cross(z, x);
+    let to_frame = |v: [f32; 3]| [dot(v, x), dot(v, y), dot(v, z)];
+    for i in 0..4 {
+        let v = to_frame(p(i));
+        row[3 * i..3 * i + 3].copy_from_slice(&v);
+        let c = 17 + 3 * i;
+        let v = to_frame([row[c], row[c + 1], row[c + 2]]);
+        row[c..c + 3].copy_from_slice(&v);
+    }
+}
+
 /// Undirected edge key.
 #[inline]
 fn edge_key(a: u32, b: u32) -> u64 {

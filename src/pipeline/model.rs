@@ -38,6 +38,10 @@ pub struct ModelConfig {
     pub preset: String,
     /// Whether the per-candidate context features follow F_info in the input.
     pub use_context: bool,
+    /// Whether the model reads F_info in each candidate's own frame
+    /// ([`crate::pipeline::features::to_local_frame`], applied inside the model, so
+    /// callers always pass the cloud-frame rows) instead of the cloud's frame.
+    pub local_frame: bool,
     /// Face-encoder widths: the outputs of its 5 layers (residual block after the 2nd).
     pub face_widths: [usize; 5],
     /// Per-point feature width d_P gathered for each corner (0: no point encoder).
@@ -63,6 +67,7 @@ impl ModelConfig {
         ModelConfig {
             preset: "paper".into(),
             use_context: false,
+            local_frame: false,
             face_widths: [128, 128, 256, 512, 256],
             point_dim: 64,
             point_encoder: Some(KpfcnnConfig { out_dim: 64, ..KpfcnnConfig::paper() }),
@@ -80,6 +85,7 @@ impl ModelConfig {
         ModelConfig {
             preset: "default".into(),
             use_context: true,
+            local_frame: true,
             face_widths: [64, 64, 96, 128, 96],
             point_dim: 0,
             point_encoder: None,
@@ -169,6 +175,9 @@ impl ModelConfig {
             self.leaky_slope,
             self.bn_momentum
         );
+        if self.local_frame {
+            t += "local_frame = true\n";
+        }
         if let Some(k) = &self.point_encoder {
             let blocks: Vec<&str> = k.blocks.iter().map(|&b| block_name(b)).collect();
             let input = match k.input {
@@ -207,7 +216,8 @@ impl ModelConfig {
     /// [`ModelConfig::validate`]), and when the stored input width does not match this
     /// build's feature layout.
     pub fn from_text(text: &str, name: &Path) -> Result<ModelConfig> {
-        let mut c = ModelConfig::default_preset();
+        // A config without `local_frame` predates it: cloud-frame F_info.
+        let mut c = ModelConfig { local_frame: false, ..ModelConfig::default_preset() };
         let mut kp = KpfcnnConfig::default_preset();
         let mut face_in = None;
         let mut seen: Vec<&str> = Vec::new();
@@ -231,6 +241,7 @@ impl ModelConfig {
             match k {
                 "preset" => c.preset = v.to_string(),
                 "use_context" => c.use_context = v.parse().map_err(|_| bad("bad bool"))?,
+                "local_frame" => c.local_frame = v.parse().map_err(|_| bad("bad bool"))?,
                 "face_in" => face_in = Some(int(v)?),
                 "face_widths" => {
                     let w = usize_list(v)?;
@@ -429,7 +440,7 @@ impl Model {
             return Ok(Vec::new());
         }
         let mut g = Graph::eval_shared(&self.params);
-        let x = g.input(Tensor::new(&[m, self.net.config.face_in()], face_features.to_vec())?);
+        let x = g.input(Tensor::new(&[m, self.net.config.face_in()], self.framed(face_features.to_vec()))?);
         let logits = self.net.forward(&mut g, x, None)?;
         Ok(probabilities(g.value(logits).data()))
     }
@@ -467,9 +478,24 @@ impl Model {
         let pyr = prepare(points, kp.config())?;
         let mut g = Graph::eval_shared(&self.params);
         let pf = kp.forward(&mut g, &pyr)?;
-        let x = g.input(Tensor::new(&[m, self.net.config.face_in()], face_features.to_vec())?);
+        let x = g.input(Tensor::new(&[m, self.net.config.face_in()], self.framed(face_features.to_vec()))?);
         let logits = self.net.forward_points_eval(&mut g, x, pf, corners)?;
         Ok(probabilities(g.value(logits).data()))
+    }
+
+    /// The input rows as the network reads them: with [`ModelConfig::local_frame`], each
+    /// row's F_info in the candidate's own frame; otherwise unchanged. Training and
+    /// inference both go through this.
+    pub fn framed(&self, mut rows: Vec<f32>) -> Vec<f32> {
+        let fin = self.net.config.face_in();
+        if self.net.config.local_frame && fin >= crate::pipeline::features::F_INFO_DIM {
+            crate::par::for_each_chunk_mut(&mut rows, fin * 256, |_, chunk| {
+                for row in chunk.chunks_mut(fin) {
+                    crate::pipeline::features::to_local_frame(row);
+                }
+            });
+        }
+        rows
     }
 
     /// Rows of `face_features` for this model's input width.
@@ -728,6 +754,14 @@ mod tests {
         let mut t = ModelConfig::default_preset().to_text();
         t = t.replace("face_widths = 64", "face_widths = 0");
         assert!(ModelConfig::from_text(&t, p).is_err());
+        // `local_frame`: written only when set; a config without it predates it.
+        let def = ModelConfig::default_preset().to_text();
+        assert!(
+            def.contains("local_frame = true\n") && !ModelConfig::paper().to_text().contains("local_frame")
+        );
+        let old = ModelConfig::from_text(&def.replace("local_frame = true\n", ""), p).unwrap();
+        assert_eq!(old, ModelConfig { local_frame: false, ..ModelConfig::default_preset() });
+        assert!(ModelConfig::from_text(&def.replace("local_frame = true", "local_frame = yes"), p).is_err());
         // Point-encoder keys: all needed with point_dim > 0, none allowed without, each
         // value checked.
         let kp = ModelConfig::default_kp().to_text();
@@ -759,6 +793,59 @@ mod tests {
         let m = Model::from_bytes(bytes, Path::new("fixture")).unwrap();
         assert_eq!(m.config(), &ModelConfig::default_preset());
         assert_eq!(m.to_checkpoint(None).to_bytes(), bytes.to_vec());
+    }
+
+    /// A `local_frame` model gives the same probabilities for F_info rows of a rotated
+    /// cloud (offsets and corner normals rotated); a cloud-frame model does not.
+    #[test]
+    fn local_frame_models_ignore_a_rotation_of_the_cloud() {
+        let mut rng = Rng::new(9);
+        let r = rng.rotation();
+        let rot = |v: [f32; 3]| -> [f32; 3] {
+            std::array::from_fn(|i| (0..3).map(|j| r[i][j] as f32 * v[j]).sum::<f32>())
+        };
+        // Rows of a slightly bent quad: offsets, then shape columns, normals, context.
+        let m = 16;
+        let fin = ModelConfig::default_preset().face_in();
+        let mut rows = Vec::new();
+        for k in 0..m {
+            let t = k as f32 * 0.1;
+            // Offsets of several spacings, as far candidates have, so that an untrained
+            // network's output visibly depends on them.
+            let q = [[0.0, 0.0, 0.0], [1.0 + t, 0.1, 0.0], [1.1, 1.0, 0.2 * t], [0.0, 0.9 + t, 0.1]]
+                .map(|p: [f32; 3]| p.map(|x| 10.0 * x));
+            let geo = crate::pipeline::candidates::quad_geom(q);
+            let mut row = vec![0.0f32; fin];
+            let mut f = [0.0f32; crate::pipeline::features::F_INFO_DIM];
+            crate::pipeline::features::f_info_row(&q, &[1.0; 4], [0, 1, 2, 3], &mut f);
+            row[..f.len()].copy_from_slice(&f);
+            row[f.len()..].iter_mut().enumerate().for_each(|(i, x)| *x = geo.len[i % 4] + i as f32 * 0.01);
+            rows.push(row);
+        }
+        let rotated: Vec<f32> = rows
+            .iter()
+            .flat_map(|row| {
+                let mut r2 = row.clone();
+                for c in [0, 3, 6, 9, 17, 20, 23, 26] {
+                    let v = rot([row[c], row[c + 1], row[c + 2]]);
+                    r2[c..c + 3].copy_from_slice(&v);
+                }
+                r2
+            })
+            .collect();
+        let rows: Vec<f32> = rows.concat();
+        for local in [true, false] {
+            let cfg = ModelConfig { local_frame: local, ..ModelConfig::default_preset() };
+            let model = Model::new(cfg, 3).unwrap();
+            let (a, b) = (model.predict(&rows).unwrap(), model.predict(&rotated).unwrap());
+            let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+            eprintln!("local_frame {local}: worst probability change under rotation {worst:e}");
+            if local {
+                assert!(worst < 1e-6, "local frame: worst difference {worst}");
+            } else {
+                assert!(worst > 1e-5, "cloud frame: rotation changed nothing ({worst})");
+            }
+        }
     }
 
     #[test]
@@ -889,7 +976,8 @@ mod tests {
             let pyr = prepare(&pts, kp.config()).unwrap();
             let mut g = Graph::eval_shared(&m.params);
             let pf = kp.forward(&mut g, &pyr).unwrap();
-            let x = g.input(Tensor::new(&[mc, fin], feats.clone()).unwrap());
+            // The rows as training feeds them (in the candidate's frame for this preset).
+            let x = g.input(Tensor::new(&[mc, fin], m.framed(feats.clone())).unwrap());
             let logits = m.net.forward(&mut g, x, Some((pf, corner_indices(&corners)))).unwrap();
             let slow = probabilities(g.value(logits).data());
             assert_eq!(fast.len(), slow.len());

@@ -328,6 +328,8 @@ pub fn train(
                     (x, rot.filter(|_| encoded).map(|r| rotate_points(&s.points, &r)))
                 }
             };
+            // F_info in each candidate's frame when the model reads it so.
+            let x = model.framed(x);
             let Model { net, params } = &mut *model;
             let pyramid = match net.point_encoder() {
                 Some(kp) => {

@@ -104,12 +104,17 @@ pub fn reconstruct_with_report(
     }
     report.predicted = faces.len();
     let mesh = if cfg.run_postprocess {
-        // The post-process works in the input's own coordinates (its thresholds are
-        // angles and ratios), so the vertices hole filling adds need no mapping back.
-        let (mesh, pp) = postprocess(points, &faces, &face_probs, &cfg.postprocess)?;
+        // The post-process runs in the normalised frame (in f64): in the input's own
+        // coordinates its squared lengths and areas overflow at 1e200 and vanish at
+        // 1e-200. Its thresholds are angles and ratios, so only the vertices the hole
+        // filling adds need mapping back; the input's own are written back as given.
+        let local64: Vec<[f64; 3]> = points.iter().map(|&p| frame.to_local_f64(p)).collect();
+        let (mesh, pp) = postprocess(&local64, &faces, &face_probs, &cfg.postprocess)?;
         report.vertices_added = mesh.vertices.len() - points.len();
         report.postprocess = Some(pp);
-        mesh
+        let mut vertices = points.to_vec();
+        vertices.extend(mesh.vertices[points.len()..].iter().map(|&p| frame.to_world_f64(p)));
+        QuadMesh { vertices, quads: mesh.quads }
     } else {
         QuadMesh { vertices: points.to_vec(), quads: faces }
     };

@@ -65,13 +65,20 @@ pub fn run(argv: &[String]) -> Result<()> {
         MAX_PER_POINT,
         "more keeps every candidate anyway",
     )?;
+    crate::output::check_output_path(std::path::Path::new(&output))?;
     let t0 = std::time::Instant::now();
     let points = point2quad::io::points::read_points(std::path::Path::new(input))?;
     let t_read = t0.elapsed();
-    let frame = Frame::fit(&points).map_err(|e| Error::invalid(format!("{input}: {e}")))?;
+    // The library's refusals do not know the file; name it (once: not "invalid
+    // input: FILE: invalid input: …").
+    let named = |e: Error| match e {
+        Error::InvalidInput(m) => Error::invalid(format!("{input}: {m}")),
+        other => other,
+    };
+    let frame = Frame::fit(&points).map_err(named)?;
     let local = frame.to_local_all(&points);
     let t1 = std::time::Instant::now();
-    let cands = generate(&local, &cfg).map_err(|e| Error::invalid(format!("{input}: {e}")))?;
+    let cands = generate(&local, &cfg).map_err(named)?;
     let t_gen = t1.elapsed();
     let mut text = String::with_capacity(cands.quads.len() * 24);
     for q in &cands.quads {
@@ -81,14 +88,15 @@ pub fn run(argv: &[String]) -> Result<()> {
     point2quad::io::atomic::write_atomic(std::path::Path::new(&output), |w| {
         w.write_all(text.as_bytes()).map_err(|e| point2quad::Error::io(&output, e))
     })?;
-    eprintln!(
-        "candidates: {} points, {} candidates ({:.2} per point), read {:.3} s, generate {:.3} s -> {}",
+    // Through `output::stderr`: `eprintln!` panics when stderr is a closed pipe.
+    crate::output::stderr(&format!(
+        "candidates: {} points, {} candidates ({:.2} per point), read {:.3} s, generate {:.3} s -> {}\n",
         points.len(),
         cands.quads.len(),
         cands.quads.len() as f64 / points.len() as f64,
         t_read.as_secs_f64(),
         t_gen.as_secs_f64(),
         output
-    );
+    ));
     Ok(())
 }

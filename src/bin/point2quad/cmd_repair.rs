@@ -4,6 +4,7 @@
 use std::path::Path;
 
 use crate::args::{Args, Spec};
+use crate::output::say;
 use point2quad::io::mesh_io::{read_mesh, write_mesh, MeshFormat};
 use point2quad::mesh::poly::PolyMesh;
 use point2quad::mesh::postprocess::{postprocess, PostprocessConfig};
@@ -49,6 +50,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let output = a.required("repair", "-o")?;
     // Fail on a bad output extension before doing any work.
     MeshFormat::from_path(Path::new(output))?;
+    crate::output::check_output_path(Path::new(output))?;
     let mut cfg = PostprocessConfig {
         score_limit: a.parsed("repair", "--score-limit", PostprocessConfig::default().score_limit)?,
         score_filter: !a.switch("--no-filter"),
@@ -83,19 +85,21 @@ pub fn run(argv: &[String]) -> Result<()> {
         .map_err(|e| Error::invalid(format!("{input}: {}", bare(e))))?;
     write_mesh(Path::new(output), &PolyMesh::from(&out))?;
 
-    eprintln!("repair {input} -> {output}");
-    eprintln!(
+    say!("repair {input} -> {output}");
+    say!(
         "  faces read {}, non-quads dropped {dropped}, degenerate dropped {} (repeated vertex), \
          zero-area dropped {} (coincident or collinear corners)",
-        rep.faces_in, rep.degenerate, rep.zero_area
+        rep.faces_in,
+        rep.degenerate,
+        rep.zero_area
     );
     if cfg.score_filter {
-        eprintln!("  score filter (limit {}): removed {}", cfg.score_limit, rep.removed_by_score);
+        say!("  score filter (limit {}): removed {}", cfg.score_limit, rep.removed_by_score);
     }
-    eprintln!("  inserted {}, refused (would break manifoldness) {}", rep.inserted, rep.refused_on_insertion);
+    say!("  inserted {}, refused (would break manifoldness) {}", rep.inserted, rep.refused_on_insertion);
     if cfg.fill_holes {
         let h = &rep.hole_fill;
-        eprintln!(
+        say!(
             "  hole filling: {} of {} eligible loops closed ({} loops before), quads added {} (patterns {:?}), \
              vertices added {}, unused input points reused {}",
             h.loops_closed,
@@ -107,11 +111,8 @@ pub fn run(argv: &[String]) -> Result<()> {
             h.vertices_reused
         );
     }
-    eprintln!(
-        "  components re-oriented (closed: outward; open: as most input faces): {}",
-        rep.components_flipped
-    );
-    eprintln!(
+    say!("  components re-oriented (closed: outward; open: as most input faces): {}", rep.components_flipped);
+    say!(
         "  output: {} vertices, {} quads, {} boundary loops",
         out.vertices.len(),
         rep.faces_out,

@@ -65,10 +65,11 @@ pub fn run(argv: &[String]) -> Result<()> {
         MAX_PER_POINT,
         "more keeps every candidate anyway",
     )?;
-    crate::output::check_output_path(std::path::Path::new(&output))?;
     let t0 = std::time::Instant::now();
     let points = point2quad::io::points::read_points(std::path::Path::new(input))?;
     let t_read = t0.elapsed();
+    // After the input (its errors come first), before the work.
+    crate::output::check_output_path(std::path::Path::new(&output))?;
     // The library's refusals do not know the file; name it (once: not "invalid
     // input: FILE: invalid input: …").
     let named = |e: Error| match e {

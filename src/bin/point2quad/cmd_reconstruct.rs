@@ -63,20 +63,25 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     cfg.candidates.k =
         a.parsed_in(cmd, "--k", cfg.candidates.k, 3, MAX_K, "work grows with the cube of k")?;
-    // Check the outputs (format, folder) before the work, not after it.
+    // Check the output names before the work, not after it.
     point2quad::io::mesh_io::MeshFormat::from_path(&out)?;
-    crate::output::check_output_path(&out)?;
-    if let Some(svg) = a.value("--svg") {
-        if !Path::new(svg).extension().is_some_and(|e| e.eq_ignore_ascii_case("svg")) {
+    let svg = a.value("--svg").map(Path::new);
+    if let Some(svg) = svg {
+        if !svg.extension().is_some_and(|e| e.eq_ignore_ascii_case("svg")) {
             return Err(Error::Usage(format!(
-                "{cmd}: --svg {svg}: the preview is SVG; its name must end in .svg (see `point2quad {cmd} --help`)"
+                "{cmd}: --svg {}: the preview is SVG; its name must end in .svg (see `point2quad {cmd} --help`)",
+                svg.display()
             )));
         }
-        crate::output::check_output_path(Path::new(svg))?;
     }
     let t0 = std::time::Instant::now();
     let points = read_points(&input)?;
     let t_read = t0.elapsed().as_secs_f64();
+    // The output folders: after the input (its errors come first), before the work.
+    crate::output::check_output_path(&out)?;
+    if let Some(svg) = svg {
+        crate::output::check_output_path(svg)?;
+    }
     let model = match a.value("--model") {
         Some(m) => Model::load(Path::new(m))?,
         None => shipped_model()?,

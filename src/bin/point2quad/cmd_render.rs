@@ -43,7 +43,6 @@ pub fn run(argv: &[String]) -> Result<()> {
             "render: {out}: the picture is SVG; the output name must end in .svg (see `point2quad render --help`)"
         )));
     }
-    crate::output::check_output_path(Path::new(out))?;
     let mut opts = RenderOptions::default();
     if let Some(v) = args.value("--view") {
         let parsed: Option<(f64, f64)> = v
@@ -79,5 +78,6 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     opts.face_edges = !args.switch("--no-edges");
     let mesh = read_mesh(Path::new(input))?;
+    crate::output::check_output_path(Path::new(out))?;
     write_svg(Path::new(out), &mesh, &opts)
 }

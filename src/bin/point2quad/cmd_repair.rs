@@ -50,7 +50,6 @@ pub fn run(argv: &[String]) -> Result<()> {
     let output = a.required("repair", "-o")?;
     // Fail on a bad output extension before doing any work.
     MeshFormat::from_path(Path::new(output))?;
-    crate::output::check_output_path(Path::new(output))?;
     let mut cfg = PostprocessConfig {
         score_limit: a.parsed("repair", "--score-limit", PostprocessConfig::default().score_limit)?,
         score_filter: !a.switch("--no-filter"),
@@ -69,6 +68,8 @@ pub fn run(argv: &[String]) -> Result<()> {
     };
 
     let poly = read_mesh(Path::new(input))?;
+    // After the input (its errors come first), before the work.
+    crate::output::check_output_path(Path::new(output))?;
     let (quads, dropped) = if a.switch("--drop-non-quads") {
         let (q, d) = poly.to_quads_lossy();
         (q, d)

@@ -164,7 +164,8 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     augmentation(&a, &mut cfg)?;
     let ckpt_path = PathBuf::from(format!("{}.ckpt", out.display()));
-    // Both files are first written after an epoch, which may be hours away.
+    // Both files are first written after an epoch, which may be hours away; checked
+    // even before the samples are read (a large dataset takes a while to load).
     crate::output::check_output_path(&out)?;
     crate::output::check_output_path(&ckpt_path)?;
 

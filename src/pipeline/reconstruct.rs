@@ -15,6 +15,13 @@ use crate::pipeline::frame::Frame;
 use crate::pipeline::model::Model;
 use crate::{Error, Result};
 
+/// Largest neighbour count ([`CandidateConfig`]'s `k`, `normal_k`, `spacing_k`) that
+/// [`reconstruct`] accepts: candidate enumeration grows with the cube of `k` (C(k, 3)
+/// neighbour triples per point: 41,664 at 64), and `k` is only capped by the cloud
+/// size, so a stray 100000 turned a 10k-point cloud into hours of work and a 10^8-entry
+/// neighbour table. DESIGN §2 finds coverage saturated at k = 20.
+pub const MAX_NEIGHBOURS: usize = 64;
+
 /// Settings of [`reconstruct`].
 #[derive(Clone, Debug)]
 pub struct ReconstructConfig {
@@ -64,7 +71,8 @@ pub struct ReconstructReport {
 ///
 /// # Errors
 /// `Error::InvalidInput` for fewer than 4 (distinct) points, non-finite coordinates
-/// (naming the point), or a cloud with no extent; shape errors if the model does not fit.
+/// (naming the point), a cloud with no extent, a threshold outside [0, 1) or a
+/// neighbour count above [`MAX_NEIGHBOURS`]; shape errors if the model does not fit.
 pub fn reconstruct(points: &[[f64; 3]], model: &Model, cfg: &ReconstructConfig) -> Result<QuadMesh> {
     reconstruct_with_report(points, model, cfg).map(|(m, _)| m)
 }
@@ -80,6 +88,14 @@ pub fn reconstruct_with_report(
 ) -> Result<(QuadMesh, ReconstructReport)> {
     if !(cfg.threshold >= 0.0 && cfg.threshold < 1.0) {
         return Err(Error::invalid(format!("threshold {} must be in [0, 1)", cfg.threshold)));
+    }
+    let c = &cfg.candidates;
+    for (name, k) in [("k", c.k), ("normal_k", c.normal_k), ("spacing_k", c.spacing_k)] {
+        if k > MAX_NEIGHBOURS {
+            return Err(Error::invalid(format!(
+                "candidate setting {name} = {k} is above {MAX_NEIGHBOURS} (work grows with the cube of k)"
+            )));
+        }
     }
     let mut report = ReconstructReport { points: points.len(), ..Default::default() };
     let mut clock = Clock::new();
@@ -226,5 +242,24 @@ mod tests {
         let few: Vec<[f64; 3]> = (0..30).map(|i| [(i % 3) as f64, 0.0, (i % 3 == 1) as u8 as f64]).collect();
         let e = reconstruct(&few, &model, &cfg).unwrap_err().to_string();
         assert!(e.contains("3 distinct point(s) (of 30)"), "{e}");
+    }
+
+    /// Regression: a library caller's `k = 100000` was only capped by the cloud size
+    /// (C(k, 3) triples per point: hours of work); now an error naming the setting.
+    #[test]
+    fn huge_neighbour_counts_are_errors() {
+        let model = Model::new(ModelConfig::default_preset(), 7).expect("test: model");
+        let pts = shapes::cube_sphere(3).vertices;
+        let mut cfg = ReconstructConfig::default();
+        cfg.candidates.k = MAX_NEIGHBOURS;
+        assert!(reconstruct(&pts, &model, &cfg).is_ok());
+        let settings: [fn(&mut CandidateConfig); 3] =
+            [|c| c.k = 100_000, |c| c.normal_k = 65, |c| c.spacing_k = usize::MAX];
+        for set in settings {
+            let mut cfg = ReconstructConfig::default();
+            set(&mut cfg.candidates);
+            let e = reconstruct(&pts, &model, &cfg).unwrap_err().to_string();
+            assert!(e.contains("is above 64"), "{e}");
+        }
     }
 }

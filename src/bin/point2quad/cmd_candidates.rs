@@ -28,10 +28,9 @@ OPTIONS:
 A summary (points, candidates, candidates per point, time) goes to stderr.
 ";
 
-/// Largest `--k` (here and in `reconstruct`): candidate enumeration grows with the cube
-/// of k (C(k, 3) neighbour triples per point: 41,664 at 64; k = 100000 on 300 points ran
-/// for minutes); DESIGN §2 finds coverage saturated at k = 20.
-pub const MAX_K: usize = 64;
+/// Largest `--k` (here and in `reconstruct`): the library's bound (candidate work grows
+/// with the cube of k; DESIGN §2 finds coverage saturated at k = 20).
+pub const MAX_K: usize = point2quad::pipeline::reconstruct::MAX_NEIGHBOURS;
 
 /// Largest `--per-point`: DESIGN §2 measures 130–210 of the 560 triples per point
 /// passing the filters at k = 16, so 1024 keeps every passing candidate well beyond the

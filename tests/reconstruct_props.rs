@@ -232,3 +232,32 @@ fn degenerate_clouds_never_panic() {
     let tiny: Vec<[f64; 3]> = c.iter().map(|p| [p[0] * 1e-300, p[1] * 1e-300, p[2] * 1e-300]).collect();
     ok_or_clean_error(&tiny, "1e-300");
 }
+
+/// Regression: the frame's squared distances overflowed at 1e200 (vanished at
+/// 1e-200), so such clouds were refused as "all points are identical", and the
+/// post-process ran in input coordinates, where areas overflow. Power-of-two scaling
+/// is exact, so the faces must be the unit cloud's and the vertices hole filling adds
+/// must be the unit cloud's, scaled.
+#[test]
+fn extreme_power_of_two_scales_give_identical_faces() {
+    let pts = cloud(0, 3);
+    let cfg = ReconstructConfig { threshold: 0.3, ..Default::default() };
+    let a = reconstruct(&pts, model(), &cfg).expect("reconstruct");
+    assert!(!a.quads.is_empty());
+    // This cloud and model make the hole filling add vertices (6), so their mapping
+    // back to the input's frame is checked below.
+    assert!(a.vertices.len() > pts.len(), "no vertex added: the check below would be vacuous");
+    for e in [-1000, -700, 700, 1000] {
+        let k = 2f64.powi(e);
+        let scaled: Vec<[f64; 3]> = pts.iter().map(|p| p.map(|c| c * k)).collect();
+        let b = reconstruct(&scaled, model(), &cfg).unwrap_or_else(|err| panic!("2^{e}: {err}"));
+        assert_eq!(a.quads, b.quads, "2^{e}");
+        assert_valid(&b);
+        assert_prefix(&b, &scaled);
+        assert_eq!(a.vertices.len(), b.vertices.len(), "2^{e}");
+        for (u, v) in a.vertices[pts.len()..].iter().zip(&b.vertices[pts.len()..]) {
+            let back = v.map(|c| c / k);
+            assert!(point2quad::math::dist_sq(*u, back).sqrt() < 1e-9, "2^{e}: {u:?} vs {back:?}");
+        }
+    }
+}

@@ -18,8 +18,10 @@ impl Frame {
     ///
     /// # Errors
     /// `InvalidInput` when the cloud is empty, has fewer than 4 points, has a NaN or
-    /// infinite coordinate (the error names the point index), or has no extent (all
-    /// points identical, up to f64 rounding relative to the coordinates' magnitude).
+    /// infinite coordinate (the error names the point index), has no extent (all
+    /// points identical, up to f64 rounding relative to the coordinates' magnitude), or
+    /// is so large (coordinates near ±1.8e308) that its radius overflows f64. Clouds at
+    /// any other scale, subnormal up to about 1e307, are fitted.
     pub fn fit(points: &[[f64; 3]]) -> Result<Frame> {
         if points.is_empty() {
             return Err(Error::invalid("empty point cloud"));
@@ -33,27 +35,45 @@ impl Frame {
         if let Some((i, p)) = points.iter().enumerate().find(|(_, p)| p.iter().any(|c| !c.is_finite())) {
             return Err(Error::invalid(format!("point {i} has a non-finite coordinate {p:?}")));
         }
+        // Checked exactly: the rounding of the centroid below leaves identical points a
+        // tiny radius, which would be reported as an extent lost in rounding.
+        if points.iter().all(|p| p == &points[0]) {
+            return Err(Error::invalid("degenerate point cloud: all points are identical"));
+        }
+        // Work on the points divided by their largest coordinate magnitude: sums and
+        // squared distances of raw coordinates overflow (1e200) or underflow (1e-200,
+        // subnormals) long before the coordinates themselves do, and a cloud at 1e200
+        // was refused as "all points identical".
+        let mag = points.iter().flatten().fold(0.0f64, |m, c| m.max(c.abs()));
+        let unit = |p: &[f64; 3]| [p[0] / mag, p[1] / mag, p[2] / mag];
         let n = points.len() as f64;
-        let mut center = [0.0f64; 3];
+        let mut centroid = [0.0f64; 3];
         for p in points {
+            let q = unit(p);
             for a in 0..3 {
-                center[a] += p[a];
+                centroid[a] += q[a];
             }
         }
-        for c in &mut center {
+        for c in &mut centroid {
             *c /= n;
         }
-        let mut r2 = 0.0f64;
-        let mut mag = 0.0f64;
-        for p in points {
-            r2 = r2.max(crate::math::dist_sq(*p, center));
-            mag = mag.max(p.iter().fold(0.0f64, |m, c| m.max(c.abs())));
-        }
-        let scale = r2.sqrt();
+        let radius =
+            points.iter().map(|p| crate::math::dist_sq(unit(p), centroid)).fold(0.0f64, f64::max).sqrt();
         // An extent at the level of f64 rounding of the coordinates is no extent: the
         // local coordinates would be pure rounding noise.
-        if !scale.is_finite() || scale <= mag * 1e-12 || scale == 0.0 {
-            return Err(Error::invalid("degenerate point cloud: all points are identical"));
+        if radius <= 1e-12 {
+            return Err(Error::invalid(format!(
+                "degenerate point cloud: its extent ({:.3e}) is below the f64 resolution of its \
+                 coordinates (up to {mag:.3e}); subtract the common offset first",
+                radius * mag
+            )));
+        }
+        let center = centroid.map(|c| c * mag);
+        let scale = radius * mag;
+        if !scale.is_finite() {
+            return Err(Error::invalid(format!(
+                "point cloud too large: its radius overflows f64 (coordinates up to {mag:.3e})"
+            )));
         }
         Ok(Frame { center, scale })
     }
@@ -61,12 +81,14 @@ impl Frame {
     /// World → local (f32, the precision every later stage works in).
     #[inline]
     pub fn to_local(&self, p: [f64; 3]) -> [f32; 3] {
-        let s = 1.0 / self.scale;
-        [
-            ((p[0] - self.center[0]) * s) as f32,
-            ((p[1] - self.center[1]) * s) as f32,
-            ((p[2] - self.center[2]) * s) as f32,
-        ]
+        self.to_local_f64(p).map(|c| c as f32)
+    }
+
+    /// World → local in f64 (the post-process's precision). Divides rather than
+    /// multiplying by `1 / scale`, which is infinite for a subnormal scale.
+    #[inline]
+    pub fn to_local_f64(&self, p: [f64; 3]) -> [f64; 3] {
+        std::array::from_fn(|a| (p[a] - self.center[a]) / self.scale)
     }
 
     /// Local → world.
@@ -77,6 +99,12 @@ impl Frame {
             p[1] as f64 * self.scale + self.center[1],
             p[2] as f64 * self.scale + self.center[2],
         ]
+    }
+
+    /// Local → world, from f64 local coordinates.
+    #[inline]
+    pub fn to_world_f64(&self, p: [f64; 3]) -> [f64; 3] {
+        std::array::from_fn(|a| p[a] * self.scale + self.center[a])
     }
 
     /// [`Frame::to_local`] on every point.
@@ -124,5 +152,52 @@ mod tests {
         assert!(Frame::fit(&p).is_err());
         // Collinear is a legitimate (if useless) frame.
         assert!(Frame::fit(&[[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [3.0, 0.0, 0.0]]).is_ok());
+    }
+    fn lattice() -> Vec<[f64; 3]> {
+        (0..27).map(|i| [(i % 3) as f64 - 0.5, ((i / 3) % 3) as f64 + 0.25, (i / 9) as f64 * 0.75]).collect()
+    }
+
+    /// Regression: squared distances overflowed at 1e200 (and vanished at 1e-200), so
+    /// such clouds were refused as "all points identical". Power-of-two scaling is
+    /// exact, so the local coordinates must be bit-identical at any such scale.
+    #[test]
+    fn extreme_scales_fit_to_the_same_local_frame() {
+        let pts = lattice();
+        let local = Frame::fit(&pts).unwrap().to_local_all(&pts);
+        for e in [-1020, -700, -300, 300, 700, 1000] {
+            let k = 2f64.powi(e);
+            let scaled: Vec<[f64; 3]> = pts.iter().map(|p| p.map(|c| c * k)).collect();
+            let f = Frame::fit(&scaled).unwrap_or_else(|err| panic!("2^{e}: {err}"));
+            assert_eq!(f.to_local_all(&scaled), local, "2^{e}");
+            for (p, l) in scaled.iter().zip(&local) {
+                let w = f.to_world(*l);
+                assert!(crate::math::dist_sq(w.map(|c| c / k), p.map(|c| c / k)).sqrt() < 1e-6, "2^{e}");
+            }
+        }
+        // Subnormal coordinates (1e-310): fewer bits, but a frame, and finite local
+        // coordinates in the unit ball (1 / scale is infinite there; no division by it).
+        let sub: Vec<[f64; 3]> = pts.iter().map(|p| p.map(|c| c * 1e-310)).collect();
+        let f = Frame::fit(&sub).unwrap();
+        for (a, b) in f.to_local_all(&sub).iter().zip(&local) {
+            assert!(a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-3), "{a:?} vs {b:?}");
+        }
+    }
+
+    /// The refusals say what is wrong: identical points, an extent lost in the rounding
+    /// of a large offset (naming both), a radius that overflows f64.
+    #[test]
+    fn degenerate_frames_say_why() {
+        let err = |p: &[[f64; 3]]| Frame::fit(p).unwrap_err().to_string();
+        assert!(err(&[[0.0; 3]; 5]).contains("identical"));
+        // The centroid of 100 copies of 3.5 is not exactly 3.5: still "identical".
+        assert!(err(&[[1.5, 2.5, 3.5]; 100]).contains("all points are identical"));
+        let offset: Vec<[f64; 3]> = lattice().iter().map(|p| [p[0] + 1e15, p[1], p[2]]).collect();
+        let e = err(&offset);
+        assert!(e.contains("f64 resolution") && e.contains("1.000e15"), "{e}");
+        // 1e12 is fine (DESIGN: any scale, pose or offset that f64 resolves).
+        let ok: Vec<[f64; 3]> = lattice().iter().map(|p| [p[0] + 1e12, p[1] - 1e12, p[2]]).collect();
+        assert!(Frame::fit(&ok).is_ok());
+        let far = [[f64::MAX, 0.0, 0.0], [-f64::MAX, 0.0, 0.0], [0.0, f64::MAX, 0.0], [0.0, 0.0, -f64::MAX]];
+        assert!(err(&far).contains("overflows"), "{}", err(&far));
     }
 }

@@ -4,7 +4,8 @@
 //! the model has one), post-process the faces predicted real into a manifold
 //! pure-quad mesh. The output's vertices are the input points, bit-identical and in
 //! order (unused ones stay as isolated vertices, so indices match the input), then any
-//! vertices the hole filling added (mapped back to the input's frame).
+//! vertices the hole filling added (mapped back to the input's frame). Exact duplicate
+//! points are one point to the pipeline: faces use the first occurrence.
 
 use crate::mesh::poly::QuadMesh;
 use crate::mesh::postprocess::{postprocess, PostprocessConfig, PostprocessReport};
@@ -13,6 +14,13 @@ use crate::pipeline::features::face_input;
 use crate::pipeline::frame::Frame;
 use crate::pipeline::model::Model;
 use crate::{Error, Result};
+
+/// Largest neighbour count ([`CandidateConfig`]'s `k`, `normal_k`, `spacing_k`) that
+/// [`reconstruct`] accepts: candidate enumeration grows with the cube of `k` (C(k, 3)
+/// neighbour triples per point: 41,664 at 64), and `k` is only capped by the cloud
+/// size, so a stray 100000 turned a 10k-point cloud into hours of work and a 10^8-entry
+/// neighbour table. DESIGN §2 finds coverage saturated at k = 20.
+pub const MAX_NEIGHBOURS: usize = 64;
 
 /// Settings of [`reconstruct`].
 #[derive(Clone, Debug)]
@@ -62,8 +70,9 @@ pub struct ReconstructReport {
 /// Point cloud → pure-quad manifold mesh with `model`.
 ///
 /// # Errors
-/// `Error::InvalidInput` for fewer than 4 points, non-finite coordinates (naming the
-/// point), or a cloud with no extent; shape errors if the model does not fit.
+/// `Error::InvalidInput` for fewer than 4 (distinct) points, non-finite coordinates
+/// (naming the point), a cloud with no extent, a threshold outside [0, 1) or a
+/// neighbour count above [`MAX_NEIGHBOURS`]; shape errors if the model does not fit.
 pub fn reconstruct(points: &[[f64; 3]], model: &Model, cfg: &ReconstructConfig) -> Result<QuadMesh> {
     reconstruct_with_report(points, model, cfg).map(|(m, _)| m)
 }
@@ -80,10 +89,32 @@ pub fn reconstruct_with_report(
     if !(cfg.threshold >= 0.0 && cfg.threshold < 1.0) {
         return Err(Error::invalid(format!("threshold {} must be in [0, 1)", cfg.threshold)));
     }
+    let c = &cfg.candidates;
+    for (name, k) in [("k", c.k), ("normal_k", c.normal_k), ("spacing_k", c.spacing_k)] {
+        if k > MAX_NEIGHBOURS {
+            return Err(Error::invalid(format!(
+                "candidate setting {name} = {k} is above {MAX_NEIGHBOURS} (work grows with the cube of k)"
+            )));
+        }
+    }
     let mut report = ReconstructReport { points: points.len(), ..Default::default() };
     let mut clock = Clock::new();
-    let frame = Frame::fit(points)?;
-    let local = frame.to_local_all(points);
+    // Validate the cloud as given (errors name input indices), then work on its
+    // distinct points: exact duplicates fill the k nearest neighbours with copies
+    // (5 copies of each point left a k = 20 search 4 distinct neighbours, and half the
+    // faces of a cube were lost) and add nothing to the surface.
+    Frame::fit(points)?;
+    let distinct = distinct_points(points);
+    let uniq: Vec<[f64; 3]> = distinct.iter().map(|&i| points[i as usize]).collect();
+    if uniq.len() < 4 {
+        return Err(Error::invalid(format!(
+            "point cloud has {} distinct point(s) (of {}); at least 4 are needed for a quad",
+            uniq.len(),
+            points.len()
+        )));
+    }
+    let frame = Frame::fit(&uniq)?;
+    let local = frame.to_local_all(&uniq);
     clock.lap(&mut report, "normalise");
     let cands = generate(&local, &cfg.candidates)?;
     report.candidates = cands.len();
@@ -103,19 +134,45 @@ pub fn reconstruct_with_report(
         }
     }
     report.predicted = faces.len();
+    // Index `i` of the distinct points (or, past them, of a vertex hole filling added)
+    // → index in the output, whose vertices are the input points, then the added ones.
+    let (n, u) = (points.len(), uniq.len());
+    let to_output = |i: u32| if (i as usize) < u { distinct[i as usize] } else { (n - u) as u32 + i };
     let mesh = if cfg.run_postprocess {
-        // The post-process works in the input's own coordinates (its thresholds are
-        // angles and ratios), so the vertices hole filling adds need no mapping back.
-        let (mesh, pp) = postprocess(points, &faces, &face_probs, &cfg.postprocess)?;
-        report.vertices_added = mesh.vertices.len() - points.len();
+        // The post-process runs in the normalised frame (in f64): in the input's own
+        // coordinates its squared lengths and areas overflow at 1e200 and vanish at
+        // 1e-200. Its thresholds are angles and ratios, so only the vertices the hole
+        // filling adds need mapping back; the input's own are written back as given.
+        let local64: Vec<[f64; 3]> = uniq.iter().map(|&p| frame.to_local_f64(p)).collect();
+        let (mesh, pp) = postprocess(&local64, &faces, &face_probs, &cfg.postprocess)?;
+        report.vertices_added = mesh.vertices.len() - u;
         report.postprocess = Some(pp);
-        mesh
+        let mut vertices = points.to_vec();
+        vertices.extend(mesh.vertices[u..].iter().map(|&p| frame.to_world_f64(p)));
+        QuadMesh { vertices, quads: mesh.quads.iter().map(|q| q.map(to_output)).collect() }
     } else {
-        QuadMesh { vertices: points.to_vec(), quads: faces }
+        QuadMesh { vertices: points.to_vec(), quads: faces.iter().map(|q| q.map(to_output)).collect() }
     };
     report.faces = mesh.quads.len();
     clock.lap(&mut report, "postprocess");
     Ok((mesh, report))
+}
+
+/// Indices of the first occurrence of each distinct point, in input order (`-0.0`
+/// and `0.0` are one value). The cloud has been validated: every coordinate is finite.
+fn distinct_points(points: &[[f64; 3]]) -> Vec<u32> {
+    let key = |p: &[f64; 3]| p.map(|c| (c + 0.0).to_bits());
+    let mut order: Vec<u32> = (0..points.len() as u32).collect();
+    // Stable: equal points keep input order, so the first of a run is the first occurrence.
+    order.sort_by_key(|&i| key(&points[i as usize]));
+    let mut first: Vec<u32> = Vec::with_capacity(points.len());
+    for (j, &i) in order.iter().enumerate() {
+        if j == 0 || key(&points[order[j - 1] as usize]) != key(&points[i as usize]) {
+            first.push(i);
+        }
+    }
+    first.sort_unstable();
+    first
 }
 
 struct Clock {
@@ -140,5 +197,69 @@ impl Clock {
         }
         #[cfg(target_arch = "wasm32")]
         report.timings.push((stage, 0.0));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::shapes;
+    use crate::pipeline::model::ModelConfig;
+
+    #[test]
+    fn distinct_points_keeps_first_occurrences_in_order() {
+        let p = [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [-0.0, 0.0, -0.0], [2.0, 0.0, 0.0]];
+        assert_eq!(distinct_points(&p), vec![0, 1, 4]);
+        assert_eq!(distinct_points(&p[..1]), vec![0]);
+    }
+
+    /// Regression: a cube's points each repeated 5 times (the copies after the
+    /// originals) lost half its faces (kNN full of copies). The copies must change
+    /// nothing: the same faces on the first occurrences, and the copies isolated.
+    #[test]
+    fn exact_duplicates_give_the_faces_of_the_distinct_cloud() {
+        let model = Model::new(ModelConfig::default_preset(), 7).expect("test: model");
+        let pts = shapes::cube_sphere(4).vertices;
+        let cfg = ReconstructConfig { threshold: 0.3, ..Default::default() };
+        let clean = reconstruct(&pts, &model, &cfg).expect("clean");
+        assert!(!clean.quads.is_empty());
+        let mut dup = pts.clone();
+        for _ in 0..5 {
+            dup.extend(pts.iter().map(|p| p.map(|c| if c == 0.0 { -c } else { c })));
+        }
+        let m = reconstruct(&dup, &model, &cfg).expect("duplicated");
+        assert_eq!(
+            m.quads,
+            clean
+                .quads
+                .iter()
+                .map(|q| q.map(|i| if (i as usize) < pts.len() { i } else { i + 5 * pts.len() as u32 }))
+                .collect::<Vec<_>>()
+        );
+        assert_eq!(&m.vertices[..dup.len()], &dup[..]);
+        assert_eq!(&m.vertices[dup.len()..], &clean.vertices[pts.len()..]);
+        // Three distinct points, however many copies: refused, saying so.
+        let few: Vec<[f64; 3]> = (0..30).map(|i| [(i % 3) as f64, 0.0, (i % 3 == 1) as u8 as f64]).collect();
+        let e = reconstruct(&few, &model, &cfg).unwrap_err().to_string();
+        assert!(e.contains("3 distinct point(s) (of 30)"), "{e}");
+    }
+
+    /// Regression: a library caller's `k = 100000` was only capped by the cloud size
+    /// (C(k, 3) triples per point: hours of work); now an error naming the setting.
+    #[test]
+    fn huge_neighbour_counts_are_errors() {
+        let model = Model::new(ModelConfig::default_preset(), 7).expect("test: model");
+        let pts = shapes::cube_sphere(3).vertices;
+        let mut cfg = ReconstructConfig::default();
+        cfg.candidates.k = MAX_NEIGHBOURS;
+        assert!(reconstruct(&pts, &model, &cfg).is_ok());
+        let settings: [fn(&mut CandidateConfig); 3] =
+            [|c| c.k = 100_000, |c| c.normal_k = 65, |c| c.spacing_k = usize::MAX];
+        for set in settings {
+            let mut cfg = ReconstructConfig::default();
+            set(&mut cfg.candidates);
+            let e = reconstruct(&pts, &model, &cfg).unwrap_err().to_string();
+            assert!(e.contains("is above 64"), "{e}");
+        }
     }
 }

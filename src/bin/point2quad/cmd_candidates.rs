@@ -28,10 +28,9 @@ OPTIONS:
 A summary (points, candidates, candidates per point, time) goes to stderr.
 ";
 
-/// Largest `--k` (here and in `reconstruct`): candidate enumeration grows with the cube
-/// of k (C(k, 3) neighbour triples per point: 41,664 at 64; k = 100000 on 300 points ran
-/// for minutes); DESIGN §2 finds coverage saturated at k = 20.
-pub const MAX_K: usize = 64;
+/// Largest `--k` (here and in `reconstruct`): the library's bound (candidate work grows
+/// with the cube of k; DESIGN §2 finds coverage saturated at k = 20).
+pub const MAX_K: usize = point2quad::pipeline::reconstruct::MAX_NEIGHBOURS;
 
 /// Largest `--per-point`: DESIGN §2 measures 130–210 of the 560 triples per point
 /// passing the filters at k = 16, so 1024 keeps every passing candidate well beyond the
@@ -68,10 +67,18 @@ pub fn run(argv: &[String]) -> Result<()> {
     let t0 = std::time::Instant::now();
     let points = point2quad::io::points::read_points(std::path::Path::new(input))?;
     let t_read = t0.elapsed();
-    let frame = Frame::fit(&points).map_err(|e| Error::invalid(format!("{input}: {e}")))?;
+    // After the input (its errors come first), before the work.
+    crate::output::check_output_path(std::path::Path::new(&output))?;
+    // The library's refusals do not know the file; name it (once: not "invalid
+    // input: FILE: invalid input: …").
+    let named = |e: Error| match e {
+        Error::InvalidInput(m) => Error::invalid(format!("{input}: {m}")),
+        other => other,
+    };
+    let frame = Frame::fit(&points).map_err(named)?;
     let local = frame.to_local_all(&points);
     let t1 = std::time::Instant::now();
-    let cands = generate(&local, &cfg).map_err(|e| Error::invalid(format!("{input}: {e}")))?;
+    let cands = generate(&local, &cfg).map_err(named)?;
     let t_gen = t1.elapsed();
     let mut text = String::with_capacity(cands.quads.len() * 24);
     for q in &cands.quads {
@@ -81,14 +88,15 @@ pub fn run(argv: &[String]) -> Result<()> {
     point2quad::io::atomic::write_atomic(std::path::Path::new(&output), |w| {
         w.write_all(text.as_bytes()).map_err(|e| point2quad::Error::io(&output, e))
     })?;
-    eprintln!(
-        "candidates: {} points, {} candidates ({:.2} per point), read {:.3} s, generate {:.3} s -> {}",
+    // Through `output::stderr`: `eprintln!` panics when stderr is a closed pipe.
+    crate::output::stderr(&format!(
+        "candidates: {} points, {} candidates ({:.2} per point), read {:.3} s, generate {:.3} s -> {}\n",
         points.len(),
         cands.quads.len(),
         cands.quads.len() as f64 / points.len() as f64,
         t_read.as_secs_f64(),
         t_gen.as_secs_f64(),
         output
-    );
+    ));
     Ok(())
 }

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use crate::args::{Args, Spec};
+use crate::output::say;
 use point2quad::io::mesh_io::read_mesh;
 use point2quad::mesh::poly::QuadMesh;
 use point2quad::pipeline::candidates::CandidateConfig;
@@ -27,21 +28,27 @@ OPTIONS:
     --synthetic N     N random synthetic quad meshes (all shape families, random pose;
                       at most 100000)
     --meshes DIR      every .obj/.off/.ply file directly in DIR (sorted by name)
-    --noise F         noise points per mesh vertex (default 0.1)
+    --noise F         noise points per mesh vertex (default 0.1; at most 100)
     --offset F        largest noise offset along the face normal, as a fraction of
-                      the face's mean edge length (default 0.1)
+                      the face's mean edge length (default 0.1; at most 100)
     --seed S          random seed (default 0); the same seed gives the same files
 
-At least one of --synthetic and --meshes is needed. A mesh that cannot be read or is
-not pure-quad is skipped with a warning naming it; the run fails if a sample cannot be
-written. Progress goes to stderr, one line per sample. Sample k (synthetic first, then
-the meshes in name order) uses its own random stream derived from the seed and k.
+At least one of --synthetic and --meshes is needed. A mesh that cannot be read, is
+not pure-quad or has no faces is skipped with a warning naming it; the run fails if a
+sample cannot be written. Progress goes to stderr, one line per sample. Sample k
+(synthetic first, then the meshes in name order) uses its own random stream derived
+from the seed and k.
 ";
 
 /// Largest `--synthetic`: each sample costs about a second on two cores and writes a
 /// file, so 100,000 is already a day's run; the bound catches typos (and a job list
 /// sized by a 20-digit number) before any work or any folder is made.
 const MAX_SYNTHETIC: usize = 100_000;
+
+/// Largest `--noise` (noise points per vertex) and `--offset` (edge lengths off the
+/// surface): the paper uses 0.1 and 0.1; a hundred times the surface's own points, or
+/// offsets of a hundred edges, are no longer a noisy surface.
+const MAX_NOISE: f64 = 100.0;
 
 /// Where a sample comes from.
 enum Job {
@@ -81,6 +88,13 @@ pub fn run(argv: &[String]) -> Result<()> {
         if !(v.is_finite() && v >= 0.0) {
             return Err(Error::Usage(format!("{CMD}: {name} must be a finite number >= 0, got {v}")));
         }
+        // A typo (1e9) otherwise fails only inside the first sample, after the output
+        // folder was made.
+        if v > MAX_NOISE {
+            return Err(Error::Usage(format!(
+                "{CMD}: {name} must be at most {MAX_NOISE}, got {v} (the surface would be lost in the noise)"
+            )));
+        }
     }
     let mut jobs: Vec<Job> = (0..synthetic).map(Job::Synthetic).collect();
     if let Some(dir) = args.value("--meshes") {
@@ -103,6 +117,7 @@ pub fn run(argv: &[String]) -> Result<()> {
             "{CMD}: nothing to do: give --synthetic N (N > 0) and/or --meshes DIR with .obj/.off/.ply files"
         )));
     }
+    let made_out = !out.exists();
     std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
     let cand_cfg = CandidateConfig::default();
     let total = jobs.len();
@@ -114,7 +129,7 @@ pub fn run(argv: &[String]) -> Result<()> {
                 Ok(mesh) => (name.clone(), mesh, sample_rng(seed, k)),
                 Err(msg) => {
                     let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-                    eprintln!("[{n}/{total}] warning: skipping {}: {msg}", path.display());
+                    say!("[{n}/{total}] warning: skipping {msg}");
                     return Ok(None);
                 }
             },
@@ -123,7 +138,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         let file = format!("{name}.{EXTENSION}");
         save_sample(&out.join(&file), &sample)?;
         let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-        eprintln!(
+        say!(
             "[{n}/{total}] {name}: {} points, {} candidates, coverage {:.4}",
             sample.points.len(),
             sample.candidates.len(),
@@ -140,11 +155,21 @@ pub fn run(argv: &[String]) -> Result<()> {
             written += 1;
         }
     }
+    if written == 0 {
+        // Every mesh was skipped: an empty dataset only fails later, in `train`. The
+        // folder goes too if this run made it (`remove_dir` leaves a non-empty one).
+        if made_out {
+            let _ = std::fs::remove_dir(&out);
+        }
+        return Err(Error::invalid(format!(
+            "no sample written: all {total} meshes were skipped (see the warnings above)"
+        )));
+    }
     let index_path = out.join("index.txt");
     point2quad::io::atomic::write_atomic(&index_path, |w| {
         w.write_all(index.as_bytes()).map_err(|e| Error::io(&index_path, e))
     })?;
-    eprintln!("dataset: {written} samples in {} ({} skipped)", out.display(), total - written);
+    say!("dataset: {written} samples in {} ({} skipped)", out.display(), total - written);
     Ok(())
 }
 
@@ -163,10 +188,18 @@ fn mesh_files(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
-/// Reads a mesh file as a pure-quad mesh; the message says why not.
+/// Reads a mesh file as a pure-quad mesh with at least one face; the message names
+/// the file (once) and says why not.
 fn load_quads(path: &Path) -> std::result::Result<QuadMesh, String> {
+    // Read errors already start with the path.
     let poly = read_mesh(path).map_err(|e| e.to_string())?;
-    poly.to_quads().map_err(|e| format!("not a pure-quad mesh ({e})"))
+    let mesh = poly.to_quads().map_err(|e| format!("{}: not a pure-quad mesh ({e})", path.display()))?;
+    if mesh.quads.is_empty() {
+        // Regression: a vertices-only .ply failed the whole run ("pts: the mesh has no
+        // faces", naming no file) instead of being skipped like other unusable meshes.
+        return Err(format!("{}: no faces (a point cloud, not a mesh)", path.display()));
+    }
+    Ok(mesh)
 }
 
 /// A file stem made safe as a sample (and file) name.

@@ -60,7 +60,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         None => None,
     };
     if gt.as_ref().is_some_and(|g| g.empty_prediction) {
-        eprintln!(
+        crate::output::say!(
             "point2quad eval: note: {pred_path} has no faces to sample (empty prediction): \
              precision 0, recall 0, Chamfer undefined"
         );

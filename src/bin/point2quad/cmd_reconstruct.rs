@@ -55,18 +55,42 @@ pub fn run(argv: &[String]) -> Result<()> {
     })?);
     let mut cfg = ReconstructConfig { run_postprocess: !a.switch("--no-postprocess"), ..Default::default() };
     cfg.threshold = a.parsed(cmd, "--threshold", cfg.threshold)?;
+    if !(0.0..1.0).contains(&cfg.threshold) {
+        return Err(Error::Usage(format!(
+            "{cmd}: --threshold must be in [0, 1), got {} (a probability; see `point2quad {cmd} --help`)",
+            cfg.threshold
+        )));
+    }
     cfg.candidates.k =
         a.parsed_in(cmd, "--k", cfg.candidates.k, 3, MAX_K, "work grows with the cube of k")?;
-    // Check the output format before the work, not after it.
+    // Check the output names before the work, not after it.
     point2quad::io::mesh_io::MeshFormat::from_path(&out)?;
+    let svg = a.value("--svg").map(Path::new);
+    if let Some(svg) = svg {
+        if !svg.extension().is_some_and(|e| e.eq_ignore_ascii_case("svg")) {
+            return Err(Error::Usage(format!(
+                "{cmd}: --svg {}: the preview is SVG; its name must end in .svg (see `point2quad {cmd} --help`)",
+                svg.display()
+            )));
+        }
+    }
     let t0 = std::time::Instant::now();
     let points = read_points(&input)?;
     let t_read = t0.elapsed().as_secs_f64();
+    // The output folders: after the input (its errors come first), before the work.
+    crate::output::check_output_path(&out)?;
+    if let Some(svg) = svg {
+        crate::output::check_output_path(svg)?;
+    }
     let model = match a.value("--model") {
         Some(m) => Model::load(Path::new(m))?,
         None => shipped_model()?,
     };
-    let (mesh, rep) = reconstruct_with_report(&points, &model, &cfg)?;
+    // The library's refusals (too few points, no extent…) do not know the file.
+    let (mesh, rep) = reconstruct_with_report(&points, &model, &cfg).map_err(|e| match e {
+        Error::InvalidInput(m) => Error::invalid(format!("{}: {m}", input.display())),
+        other => other,
+    })?;
     let t1 = std::time::Instant::now();
     let poly = PolyMesh::from(&mesh);
     write_mesh(&out, &poly)?;
@@ -101,6 +125,15 @@ pub fn run(argv: &[String]) -> Result<()> {
         rep.vertices_added,
         out.display()
     ));
+    if rep.faces == 0 {
+        crate::output::stderr(&format!(
+            "reconstruct: warning: no faces: {} holds no surface the model recognises \
+             ({} candidates, {} predicted real); the output has the points only\n",
+            input.display(),
+            rep.candidates,
+            rep.predicted
+        ));
+    }
     crate::output::stderr(&format!(
         "reconstruct: time: {} (total {:.0} ms)\n",
         stages.join(", "),

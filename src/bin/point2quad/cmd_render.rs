@@ -78,5 +78,6 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     opts.face_edges = !args.switch("--no-edges");
     let mesh = read_mesh(Path::new(input))?;
+    crate::output::check_output_path(Path::new(out))?;
     write_svg(Path::new(out), &mesh, &opts)
 }

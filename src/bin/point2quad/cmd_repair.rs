@@ -4,6 +4,7 @@
 use std::path::Path;
 
 use crate::args::{Args, Spec};
+use crate::output::say;
 use point2quad::io::mesh_io::{read_mesh, write_mesh, MeshFormat};
 use point2quad::mesh::poly::PolyMesh;
 use point2quad::mesh::postprocess::{postprocess, PostprocessConfig};
@@ -67,6 +68,8 @@ pub fn run(argv: &[String]) -> Result<()> {
     };
 
     let poly = read_mesh(Path::new(input))?;
+    // After the input (its errors come first), before the work.
+    crate::output::check_output_path(Path::new(output))?;
     let (quads, dropped) = if a.switch("--drop-non-quads") {
         let (q, d) = poly.to_quads_lossy();
         (q, d)
@@ -83,19 +86,21 @@ pub fn run(argv: &[String]) -> Result<()> {
         .map_err(|e| Error::invalid(format!("{input}: {}", bare(e))))?;
     write_mesh(Path::new(output), &PolyMesh::from(&out))?;
 
-    eprintln!("repair {input} -> {output}");
-    eprintln!(
+    say!("repair {input} -> {output}");
+    say!(
         "  faces read {}, non-quads dropped {dropped}, degenerate dropped {} (repeated vertex), \
          zero-area dropped {} (coincident or collinear corners)",
-        rep.faces_in, rep.degenerate, rep.zero_area
+        rep.faces_in,
+        rep.degenerate,
+        rep.zero_area
     );
     if cfg.score_filter {
-        eprintln!("  score filter (limit {}): removed {}", cfg.score_limit, rep.removed_by_score);
+        say!("  score filter (limit {}): removed {}", cfg.score_limit, rep.removed_by_score);
     }
-    eprintln!("  inserted {}, refused (would break manifoldness) {}", rep.inserted, rep.refused_on_insertion);
+    say!("  inserted {}, refused (would break manifoldness) {}", rep.inserted, rep.refused_on_insertion);
     if cfg.fill_holes {
         let h = &rep.hole_fill;
-        eprintln!(
+        say!(
             "  hole filling: {} of {} eligible loops closed ({} loops before), quads added {} (patterns {:?}), \
              vertices added {}, unused input points reused {}",
             h.loops_closed,
@@ -107,11 +112,8 @@ pub fn run(argv: &[String]) -> Result<()> {
             h.vertices_reused
         );
     }
-    eprintln!(
-        "  components re-oriented (closed: outward; open: as most input faces): {}",
-        rep.components_flipped
-    );
-    eprintln!(
+    say!("  components re-oriented (closed: outward; open: as most input faces): {}", rep.components_flipped);
+    say!(
         "  output: {} vertices, {} quads, {} boundary loops",
         out.vertices.len(),
         rep.faces_out,

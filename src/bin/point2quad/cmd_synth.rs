@@ -49,8 +49,10 @@ pub fn run(argv: &[String]) -> Result<()> {
             "{cmd}: {out}: the cloud is written as text; use .xyz, .txt or .pts (see `point2quad {cmd} --help`)"
         )));
     }
+    crate::output::check_output_path(Path::new(out))?;
     if let Some(gt) = a.value("--gt") {
         MeshFormat::from_path(Path::new(gt))?;
+        crate::output::check_output_path(Path::new(gt))?;
     }
     let seed = a.parsed(cmd, "--seed", 0u64)?;
     let noise =
@@ -62,7 +64,11 @@ pub fn run(argv: &[String]) -> Result<()> {
             return Err(Error::Usage(format!("{cmd}: give --from or --shape, not both")));
         }
         let poly = read_mesh(Path::new(from))?;
-        poly.to_quads().map_err(|e| Error::invalid(format!("{from}: {e}")))?
+        // Named once: not "invalid input: FILE: invalid input: …".
+        poly.to_quads().map_err(|e| match e {
+            Error::InvalidInput(m) => Error::invalid(format!("{from}: {m}")),
+            other => other,
+        })?
     } else if shape == "random" {
         random_shape(&mut rng)
     } else {

@@ -2,19 +2,13 @@
 //! `point2quad dataset`, with a validation split, per-epoch checkpoints and resume.
 
 use crate::args::{Args, Spec};
+use crate::output::say;
 use point2quad::nn::checkpoint::{self, Checkpoint};
 use point2quad::pipeline::dataset::{load_sample, Sample, EXTENSION};
 use point2quad::pipeline::model::{Model, ModelConfig};
 use point2quad::pipeline::train::{train, Progress, TrainConfig};
 use point2quad::{Error, Result};
 use std::path::{Path, PathBuf};
-
-/// `eprintln!` through [`crate::output::stderr`], which ignores write errors:
-/// `eprintln!` panics when stderr is a closed pipe (`train ... 2>&1 | head`),
-/// which killed a training run at its next progress line.
-macro_rules! say {
-    ($($t:tt)*) => { crate::output::stderr(&format!("{}\n", format_args!($($t)*))) };
-}
 
 pub const HELP: &str = "\
 point2quad train: train the Point2Quad face classifier
@@ -158,17 +152,22 @@ pub fn run(argv: &[String]) -> Result<()> {
     cfg.sgd.lr = a.parsed(cmd, "--lr", cfg.sgd.lr)?;
     cfg.max_candidates = a.parsed(cmd, "--max-candidates", cfg.max_candidates)?;
     let val_fraction: f64 = a.parsed(cmd, "--val-fraction", 0.15)?;
-    if !(0.0..1.0).contains(&val_fraction)
-        || cfg.max_candidates == 0
-        || !cfg.sgd.lr.is_finite()
-        || cfg.sgd.lr <= 0.0
-    {
-        return Err(Error::Usage(
-            "train: --val-fraction must be in [0, 1), --max-candidates and --lr positive".into(),
-        ));
+    // One message per option, naming it and the value given.
+    if !(0.0..1.0).contains(&val_fraction) {
+        return Err(Error::Usage(format!("train: --val-fraction must be in [0, 1), got {val_fraction}")));
+    }
+    if cfg.max_candidates == 0 {
+        return Err(Error::Usage("train: --max-candidates must be positive, got 0".into()));
+    }
+    if !(cfg.sgd.lr.is_finite() && cfg.sgd.lr > 0.0) {
+        return Err(Error::Usage(format!("train: --lr must be a finite number > 0, got {}", cfg.sgd.lr)));
     }
     augmentation(&a, &mut cfg)?;
     let ckpt_path = PathBuf::from(format!("{}.ckpt", out.display()));
+    // Both files are first written after an epoch, which may be hours away; checked
+    // even before the samples are read (a large dataset takes a while to load).
+    crate::output::check_output_path(&out)?;
+    crate::output::check_output_path(&ckpt_path)?;
 
     let (mut model, resume) = match a.value("--resume") {
         Some(r) => {

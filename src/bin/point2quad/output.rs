@@ -20,8 +20,45 @@ pub fn stdout(text: &str) -> Result<()> {
     }
 }
 
+/// `eprintln!` through [`stderr`], which ignores write errors: `eprintln!` panics
+/// when stderr is a closed pipe (`train ... 2>&1 | head`), which killed a training
+/// run at its next progress line.
+macro_rules! say {
+    ($($t:tt)*) => { $crate::output::stderr(&format!("{}\n", format_args!($($t)*))) };
+}
+pub(crate) use say;
+
 /// Writes `text` to stderr; failures are ignored (there is no channel left to report them on).
 pub fn stderr(text: &str) {
     let mut err = std::io::stderr().lock();
     let _ = err.write_all(text.as_bytes()).and_then(|()| err.flush());
+}
+
+/// Checks, before any work, that `path` can be an output file: its folder exists and
+/// it is not itself a folder. A long run (training, a large reconstruction) otherwise
+/// learns of a typo in the output folder only when it writes, at the very end.
+///
+/// # Errors
+/// `Io` naming `path`: "no such folder" when its parent is missing, "not a folder" when
+/// the parent is a file, "is a directory" when `path` is one.
+pub fn check_output_path(path: &std::path::Path) -> Result<()> {
+    let parent = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => std::path::Path::new("."),
+    };
+    let fail = |kind: ErrorKind, msg: &str| Err(Error::io(path, std::io::Error::new(kind, msg)));
+    match std::fs::metadata(parent) {
+        Err(e) if e.kind() == ErrorKind::NotFound => {
+            return fail(ErrorKind::NotFound, &format!("no such folder {}", parent.display()))
+        }
+        Err(e) => return Err(Error::io(path, e)),
+        Ok(m) if !m.is_dir() => {
+            return fail(ErrorKind::Other, &format!("{} is not a folder", parent.display()))
+        }
+        Ok(_) => {}
+    }
+    if path.is_dir() {
+        return fail(ErrorKind::Other, "is a directory");
+    }
+    Ok(())
 }

@@ -1,0 +1,252 @@
+//! Regressions from the robustness audit of the `point2quad` binary: clouds at extreme
+//! scales (1e±200, subnormal), degenerate clouds named by file, output folders checked
+//! before the work, closed stderr pipes, and `dataset`/`train`/`reconstruct` option
+//! and data errors. Every failure must exit non-zero with the culprit named, print no
+//! panic, and leave no file behind.
+
+#[path = "common/scratch.rs"]
+mod scratch;
+
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use scratch::Scratch;
+
+/// Runs the binary with a time limit (a hang is a bug, not a stuck test run).
+fn p2q(args: &[&str]) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_point2quad"))
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("test: run the binary");
+    let start = Instant::now();
+    while child.try_wait().expect("test: wait").is_none() {
+        if start.elapsed() > Duration::from_secs(60) {
+            let _ = child.kill();
+            panic!("point2quad {args:?} still running after 60 s (hang)");
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    child.wait_with_output().expect("test: collect output")
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// Asserts a clean failure: exit `code`, each of `needles` in stderr, no panic text.
+fn assert_fails(out: &Output, code: i32, needles: &[&str], what: &str) {
+    let err = stderr(out);
+    assert_eq!(out.status.code(), Some(code), "{what}: exit status {:?}, stderr: {err}", out.status);
+    for n in needles {
+        assert!(err.contains(n), "{what}: stderr lacks {n:?}: {err}");
+    }
+    assert!(!err.contains("panicked"), "{what}: panic in stderr: {err}");
+}
+
+fn assert_ok(out: &Output, what: &str) -> String {
+    let err = stderr(out);
+    assert_eq!(out.status.code(), Some(0), "{what}: {err}");
+    assert!(!err.contains("panicked"), "{what}: {err}");
+    err
+}
+
+/// The vertices of a 6×6-cell cube surface (a quad mesh's vertices), scaled by `k`.
+fn cube_cloud(k: f64) -> Vec<[f64; 3]> {
+    let m = 6;
+    let mut pts = Vec::new();
+    for i in 0..=m {
+        for j in 0..=m {
+            let (a, b) = (i as f64 / m as f64 * 2.0 - 1.0, j as f64 / m as f64 * 2.0 - 1.0);
+            for p in [[a, b, -1.0], [a, b, 1.0], [a, -1.0, b], [a, 1.0, b], [-1.0, a, b], [1.0, a, b]] {
+                if !pts.contains(&p) {
+                    pts.push(p);
+                }
+            }
+        }
+    }
+    pts.iter().map(|p| p.map(|c| c * k)).collect()
+}
+
+fn xyz(pts: &[[f64; 3]]) -> Vec<u8> {
+    pts.iter().map(|p| format!("{:?} {:?} {:?}\n", p[0], p[1], p[2])).collect::<String>().into_bytes()
+}
+
+/// The `f` lines of an OBJ file.
+fn faces(obj: &str) -> Vec<String> {
+    std::fs::read_to_string(obj)
+        .expect("test: read output")
+        .lines()
+        .filter(|l| l.starts_with("f "))
+        .map(String::from)
+        .collect()
+}
+
+/// Regression: squared distances overflowed at 1e200 and vanished at 1e-200, so these
+/// clouds were refused as "all points are identical"; the post-process, run in input
+/// coordinates, would have overflowed too. Power-of-two scaling is exact: the faces
+/// must be those of the unit cloud, and the output a non-empty manifold pure-quad mesh.
+#[test]
+fn extreme_scales_reconstruct_the_same_faces() {
+    let dir = Scratch::new("audit_scale");
+    let unit = dir.write("unit.xyz", &xyz(&cube_cloud(1.0)));
+    let out = dir.p("unit.obj");
+    assert_ok(&p2q(&["reconstruct", &unit, "-o", &out]), "unit");
+    let reference = faces(&out);
+    assert!(reference.len() > 100, "unit cube: only {} faces", reference.len());
+    for e in [-700, 700] {
+        let k = 2f64.powi(e);
+        let input = dir.write(&format!("s{e}.xyz"), &xyz(&cube_cloud(k)));
+        let out = dir.p(&format!("s{e}.obj"));
+        assert_ok(&p2q(&["reconstruct", &input, "-o", &out]), &format!("2^{e}"));
+        assert_eq!(faces(&out), reference, "2^{e}: different faces");
+        let ev = p2q(&["eval", &out, "--json"]);
+        let json = String::from_utf8_lossy(&ev.stdout);
+        assert!(json.contains("\"quad_only\": true") || json.contains("\"quad_only\":true"), "{json}");
+        assert!(
+            json.contains("\"nonmanifold_edges\": 0") || json.contains("\"nonmanifold_edges\":0"),
+            "{json}"
+        );
+    }
+    // Subnormal coordinates: fewer bits, but a mesh, not a refusal.
+    let sub = dir.write("sub.xyz", &xyz(&cube_cloud(1e-310)));
+    let out = dir.p("sub.obj");
+    assert_ok(&p2q(&["reconstruct", &sub, "-o", &out]), "1e-310");
+    assert!(!faces(&out).is_empty(), "1e-310: no faces");
+}
+
+/// Refusals of the cloud name the file, once ("invalid input: FILE: invalid input: …"
+/// was printed by `candidates`), and say what is wrong.
+#[test]
+fn degenerate_clouds_are_named() {
+    let dir = Scratch::new("audit_degen");
+    let same = dir.write("same.xyz", &xyz(&[[1.5, 2.5, 3.5]; 100]));
+    let far: Vec<[f64; 3]> = cube_cloud(1.0).iter().map(|p| [p[0] + 1e15, p[1], p[2]]).collect();
+    let far = dir.write("far.xyz", &xyz(&far));
+    let line: Vec<[f64; 3]> = (0..40).map(|i| [i as f64, 2.0 * i as f64, 0.0]).collect();
+    let line = dir.write("line.xyz", &xyz(&line));
+    let before = dir.entries();
+    for cmd in ["reconstruct", "candidates"] {
+        let out = dir.p("out.obj");
+        let out = if cmd == "candidates" { dir.p("out.txt") } else { out };
+        let r = p2q(&[cmd, &same, "-o", &out]);
+        assert_fails(&r, 1, &[&same, "all points are identical"], cmd);
+        assert_eq!(stderr(&r).matches("invalid input").count(), 1, "{}", stderr(&r));
+        assert_fails(&p2q(&[cmd, &far, "-o", &out]), 1, &[&far, "f64 resolution"], cmd);
+        assert_eq!(dir.entries(), before, "{cmd}: files left behind");
+    }
+    // A line has no surface: a mesh of points only, and a warning naming the file.
+    let out = dir.p("line.obj");
+    let err = assert_ok(&p2q(&["reconstruct", &line, "-o", &out]), "line");
+    assert!(err.contains("warning: no faces") && err.contains(&line), "{err}");
+    assert!(faces(&out).is_empty());
+}
+
+/// Regression: a missing output folder was found only when writing, after the work
+/// (`train`: after the first epoch); `--svg` accepted any extension and wrote SVG into
+/// `x.png`. Now each fails at once, naming the path, and writes nothing.
+#[test]
+fn output_paths_are_checked_before_the_work() {
+    let dir = Scratch::new("audit_out");
+    let cloud = dir.write("c.xyz", &xyz(&cube_cloud(1.0)));
+    let mesh = dir.write("q.obj", b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n");
+    std::fs::create_dir(dir.path("folder.obj")).expect("test: mkdir");
+    let folder = dir.p("folder.obj");
+    let gone = |name: &str| dir.p(&format!("no_such_dir/{name}"));
+    let (obj, svg, txt, model, xyz_out) =
+        (gone("o.obj"), gone("p.svg"), gone("c.txt"), gone("m.p2qm"), gone("c.xyz"));
+    let inside_file = format!("{cloud}/o.obj");
+    let png = dir.p("p.png");
+    let c2 = dir.p("c2.xyz");
+    let data = gone("data");
+    let out_obj = dir.p("out.obj");
+    let before = dir.entries();
+    let cases: Vec<(Vec<&str>, i32, Vec<&str>)> = vec![
+        (vec!["reconstruct", &cloud, "-o", &obj], 1, vec![&obj, "no such folder"]),
+        (vec!["reconstruct", &cloud, "-o", &folder], 1, vec![&folder, "is a directory"]),
+        (vec!["reconstruct", &cloud, "-o", &inside_file], 1, vec![&inside_file, "not a folder"]),
+        (vec!["reconstruct", &cloud, "-o", &out_obj, "--svg", &svg], 1, vec![&svg, "no such folder"]),
+        (vec!["reconstruct", &cloud, "-o", &out_obj, "--svg", &png], 2, vec![&png, ".svg"]),
+        (vec!["reconstruct", &cloud, "-o", &out_obj, "--threshold", "nan"], 2, vec!["--threshold", "NaN"]),
+        (vec!["candidates", &cloud, "-o", &txt], 1, vec![&txt, "no such folder"]),
+        (vec!["repair", &mesh, "-o", &obj], 1, vec![&obj, "no such folder"]),
+        (vec!["render", &mesh, "-o", &svg], 1, vec![&svg, "no such folder"]),
+        (vec!["synth", "-o", &xyz_out], 1, vec![&xyz_out, "no such folder"]),
+        (vec!["synth", "-o", &c2, "--gt", &obj], 1, vec![&obj, "no such folder"]),
+        // The data folder does not exist either: the output is checked first, before
+        // any sample is read (and long before the first epoch ends).
+        (vec!["train", "--data", &data, "--out", &model], 1, vec![&model, "no such folder"]),
+        (vec!["train", "--data", &data, "--out", &out_obj, "--lr", "nan"], 2, vec!["--lr", "NaN"]),
+        (vec!["train", "--data", &data, "--out", &out_obj, "--val-fraction", "1"], 2, vec!["--val-fraction"]),
+    ];
+    for (args, code, needles) in &cases {
+        assert_fails(&p2q(args), *code, needles, &format!("{args:?}"));
+        assert_eq!(dir.entries(), before, "{args:?}: files left behind");
+    }
+}
+
+/// Regression: `repair`, `candidates` and `dataset` printed with `eprintln!`, which
+/// panics (exit 101) when stderr is a closed pipe (`2>&1 | head`).
+#[test]
+fn closed_stderr_pipe_is_not_a_panic() {
+    let dir = Scratch::new("audit_pipe");
+    let cloud = dir.write("c.xyz", &xyz(&cube_cloud(1.0)));
+    let mesh = dir.write("q.obj", b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n");
+    let (o1, o2, o3, ds) = (dir.p("r.obj"), dir.p("c.txt"), dir.p("x.obj"), dir.p("ds"));
+    for args in [
+        vec!["repair", &mesh, "-o", &o1],
+        vec!["candidates", &cloud, "-o", &o2],
+        vec!["reconstruct", &cloud, "-o", &o3],
+        vec!["dataset", "--out", &ds, "--synthetic", "1"],
+    ] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_point2quad"))
+            .args(&args)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("test: run the binary");
+        drop(child.stderr.take());
+        let status = child.wait().expect("test: wait");
+        assert_eq!(status.code(), Some(0), "{args:?}");
+    }
+}
+
+/// Regression: a vertices-only mesh in `--meshes` failed the whole run ("pts: the mesh
+/// has no faces", naming no file) instead of being skipped; a run where every mesh was
+/// skipped "succeeded" with an empty dataset; `--noise 1e9` failed only inside the
+/// first sample, after making the output folder.
+#[test]
+fn dataset_skips_unusable_meshes_and_refuses_an_empty_result() {
+    let dir = Scratch::new("audit_dataset");
+    std::fs::create_dir(dir.path("meshes")).expect("test: mkdir");
+    let pts =
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n\
+               end_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n";
+    std::fs::write(dir.path("meshes/pts.ply"), pts).expect("test: write");
+    std::fs::write(dir.path("meshes/tri.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").expect("test: write");
+    let meshes = dir.p("meshes");
+    let out = dir.p("ds");
+    let before = dir.entries();
+    let r = p2q(&["dataset", "--out", &out, "--meshes", &meshes]);
+    assert_fails(
+        &r,
+        1,
+        &["pts.ply: no faces", "tri.obj: not a pure-quad", "no sample written"],
+        "all skipped",
+    );
+    assert_eq!(dir.entries(), before, "all skipped: output folder left behind");
+    for (flag, v) in [("--noise", "1e9"), ("--offset", "1e300")] {
+        let r = p2q(&["dataset", "--out", &out, "--synthetic", "1", flag, v]);
+        assert_fails(&r, 2, &[flag, "at most"], flag);
+        assert_eq!(dir.entries(), before, "{flag}: output folder made");
+    }
+    // With one usable mesh beside them: the two are skipped with warnings, one sample.
+    let grid = "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nv 1 1 0\nv 2 1 0\nv 0 2 0\nv 1 2 0\nv 2 2 0\n\
+                f 1 2 5 4\nf 2 3 6 5\nf 4 5 8 7\nf 5 6 9 8\n";
+    std::fs::write(dir.path("meshes/grid.obj"), grid).expect("test: write");
+    let err = assert_ok(&p2q(&["dataset", "--out", &out, "--meshes", &meshes]), "one usable");
+    assert!(err.contains("warning: skipping") && err.contains("pts.ply: no faces"), "{err}");
+    assert!(dir.path("ds/grid.p2qs").is_file() && dir.path("ds/index.txt").is_file());
+}

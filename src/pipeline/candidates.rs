@@ -864,6 +864,25 @@ fn inside_count(c: &Pre, rel: &[[f32; 3]], cfg: &CandidateConfig) -> u16 {
 /// rank, score, inside count).
 type Entry = ([u32; 4], [u32; 4], u16, f32, u16);
 
+/// Largest neighbour count ([`CandidateConfig`]'s `k`, `normal_k`, `spacing_k`) that
+/// [`generate`] accepts: candidate enumeration grows with the cube of `k` (C(k, 3)
+/// neighbour triples per point: 41,664 at 64), and `k` is otherwise only capped by the
+/// cloud size, so a stray 100000 turned a 10k-point cloud into hours of work and a
+/// 10^8-entry neighbour table. DESIGN §2 finds coverage saturated at k = 20.
+pub const MAX_NEIGHBOURS: usize = 64;
+
+/// `InvalidInput` naming the first neighbour count above [`MAX_NEIGHBOURS`].
+pub fn check_neighbour_counts(cfg: &CandidateConfig) -> Result<()> {
+    for (name, k) in [("k", cfg.k), ("normal_k", cfg.normal_k), ("spacing_k", cfg.spacing_k)] {
+        if k > MAX_NEIGHBOURS {
+            return Err(Error::invalid(format!(
+                "candidate setting {name} = {k} is above {MAX_NEIGHBOURS} (work grows with the cube of k)"
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// Rotates a cyclic quad so its smallest index comes first (direction kept).
 fn canonical(q: [u32; 4]) -> [u32; 4] {
     let s = (0..4).min_by_key(|&i| q[i]).expect("internal error: 4 corners");
@@ -875,9 +894,11 @@ fn canonical(q: [u32; 4]) -> [u32; 4] {
 ///
 /// # Errors
 /// `InvalidInput` for fewer than 4 points or a non-finite coordinate (naming the
-/// point). Degenerate clouds (collinear, coplanar, duplicates) are not errors:
-/// coplanar is an open surface and gets candidates, collinear gets none.
+/// point), and for a neighbour count (`k`, `normal_k`, `spacing_k`) above
+/// [`MAX_NEIGHBOURS`]. Degenerate clouds (collinear, coplanar, duplicates) are not
+/// errors: coplanar is an open surface and gets candidates, collinear gets none.
 pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates> {
+    check_neighbour_counts(cfg)?;
     validate(points)?;
     let n = points.len();
     let k = cfg.k.max(cfg.normal_k).max(cfg.spacing_k).max(3);
@@ -1039,6 +1060,20 @@ mod tests {
             out.truncate(cfg.per_point);
         }
         out
+    }
+
+    #[test]
+    fn neighbour_counts_above_the_bound_are_errors_before_any_work() {
+        let pts = grid(4, 4, 0.0);
+        assert!(generate(&pts, &CandidateConfig { k: MAX_NEIGHBOURS, ..Default::default() }).is_ok());
+        for cfg in [
+            CandidateConfig { k: MAX_NEIGHBOURS + 1, ..Default::default() },
+            CandidateConfig { normal_k: 100_000, ..Default::default() },
+            CandidateConfig { spacing_k: usize::MAX, ..Default::default() },
+        ] {
+            let e = generate(&pts, &cfg).unwrap_err().to_string();
+            assert!(e.contains("above 64"), "{e}");
+        }
     }
 
     #[test]

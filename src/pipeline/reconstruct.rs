@@ -15,12 +15,9 @@ use crate::pipeline::frame::Frame;
 use crate::pipeline::model::Model;
 use crate::{Error, Result};
 
-/// Largest neighbour count ([`CandidateConfig`]'s `k`, `normal_k`, `spacing_k`) that
-/// [`reconstruct`] accepts: candidate enumeration grows with the cube of `k` (C(k, 3)
-/// neighbour triples per point: 41,664 at 64), and `k` is only capped by the cloud
-/// size, so a stray 100000 turned a 10k-point cloud into hours of work and a 10^8-entry
-/// neighbour table. DESIGN §2 finds coverage saturated at k = 20.
-pub const MAX_NEIGHBOURS: usize = 64;
+/// Largest neighbour count that [`reconstruct`] accepts (the candidates' bound,
+/// [`crate::pipeline::candidates::MAX_NEIGHBOURS`]).
+pub const MAX_NEIGHBOURS: usize = crate::pipeline::candidates::MAX_NEIGHBOURS;
 
 /// Settings of [`reconstruct`].
 #[derive(Clone, Debug)]
@@ -89,14 +86,8 @@ pub fn reconstruct_with_report(
     if !(cfg.threshold >= 0.0 && cfg.threshold < 1.0) {
         return Err(Error::invalid(format!("threshold {} must be in [0, 1)", cfg.threshold)));
     }
-    let c = &cfg.candidates;
-    for (name, k) in [("k", c.k), ("normal_k", c.normal_k), ("spacing_k", c.spacing_k)] {
-        if k > MAX_NEIGHBOURS {
-            return Err(Error::invalid(format!(
-                "candidate setting {name} = {k} is above {MAX_NEIGHBOURS} (work grows with the cube of k)"
-            )));
-        }
-    }
+    // Before any work on the cloud.
+    crate::pipeline::candidates::check_neighbour_counts(&cfg.candidates)?;
     let mut report = ReconstructReport { points: points.len(), ..Default::default() };
     let mut clock = Clock::new();
     // Validate the cloud as given (errors name input indices), then work on its

@@ -47,7 +47,7 @@ fn main() -> point2quad::Result<()> {
         }
     }
     let bands = [0.0f32, 0.1, 0.2, 0.3, 0.4, 0.5];
-    let mut total = vec![0usize; 12];
+    let mut total = [0usize; 12];
     println!("mesh | GT faces | not cand | p≤.1 | .1–.2 | .2–.3 | .3–.4 | .4–.5 | p>.5 lost | out (p>.5) | out (p≤.5, refilled) | out (not cand., filled) | wrong out");
     for pair in pairs.chunks(2) {
         let gt = read_mesh(Path::new(pair[0].as_str()))?;

@@ -4,12 +4,15 @@
 //! and data errors. Every failure must exit non-zero with the culprit named, print no
 //! panic, and leave no file behind.
 
+#[path = "common/cli.rs"]
+mod cli;
 #[path = "common/scratch.rs"]
 mod scratch;
 
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+use cli::{assert_fails, stderr};
 use scratch::Scratch;
 
 /// Runs the binary with a time limit (a hang is a bug, not a stuck test run).
@@ -30,20 +33,6 @@ fn p2q(args: &[&str]) -> Output {
         std::thread::sleep(Duration::from_millis(5));
     }
     child.wait_with_output().expect("test: collect output")
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-/// Asserts a clean failure: exit `code`, each of `needles` in stderr, no panic text.
-fn assert_fails(out: &Output, code: i32, needles: &[&str], what: &str) {
-    let err = stderr(out);
-    assert_eq!(out.status.code(), Some(code), "{what}: exit status {:?}, stderr: {err}", out.status);
-    for n in needles {
-        assert!(err.contains(n), "{what}: stderr lacks {n:?}: {err}");
-    }
-    assert!(!err.contains("panicked"), "{what}: panic in stderr: {err}");
 }
 
 fn assert_ok(out: &Output, what: &str) -> String {

@@ -5,6 +5,8 @@
 //! name the file (and the line or element), never print a panic, and leave no output
 //! or temporary file behind. Degenerate meshes must give finite numbers.
 
+#[path = "common/cli.rs"]
+mod cli;
 #[path = "common/quality.rs"]
 mod quality_common;
 #[path = "common/scratch.rs"]
@@ -14,6 +16,7 @@ use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+use cli::{assert_fails, stderr};
 use quality_common::{check_xml, parse_json, Json};
 use scratch::Scratch;
 
@@ -51,24 +54,6 @@ fn p2q_in(cwd: Option<&Path>, args: &[&str]) -> Output {
         }
         std::thread::sleep(Duration::from_millis(5));
     }
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-/// Asserts a clean failure: exit `code`, each of `needles` in stderr, no panic text,
-/// nothing on stdout.
-fn assert_fails(out: &Output, code: i32, needles: &[&str], what: &str) {
-    let err = stderr(out);
-    assert_eq!(out.status.code(), Some(code), "{what}: exit status {:?}, stderr: {err}", out.status);
-    for n in needles {
-        assert!(err.contains(n), "{what}: stderr lacks {n:?}: {err}");
-    }
-    for bad in ["panicked", "RUST_BACKTRACE", "stack backtrace", "memory allocation"] {
-        assert!(!err.contains(bad), "{what}: panic/abort text in stderr: {err}");
-    }
-    assert!(out.stdout.is_empty(), "{what}: stdout on failure: {}", String::from_utf8_lossy(&out.stdout));
 }
 
 /// Deterministic "random" bytes covering every byte value.

@@ -1,0 +1,25 @@
+//! Shared checks of the CLI's failure output (used by `cli_robustness.rs` and
+//! `cli_audit.rs`).
+
+#![allow(dead_code)]
+
+use std::process::Output;
+
+/// The process's stderr as text.
+pub fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// Asserts a clean failure: exit `code`, each of `needles` in stderr, no panic text,
+/// nothing on stdout.
+pub fn assert_fails(out: &Output, code: i32, needles: &[&str], what: &str) {
+    let err = stderr(out);
+    assert_eq!(out.status.code(), Some(code), "{what}: exit status {:?}, stderr: {err}", out.status);
+    for n in needles {
+        assert!(err.contains(n), "{what}: stderr lacks {n:?}: {err}");
+    }
+    for bad in ["panicked", "RUST_BACKTRACE", "stack backtrace", "memory allocation"] {
+        assert!(!err.contains(bad), "{what}: panic/abort text in stderr: {err}");
+    }
+    assert!(out.stdout.is_empty(), "{what}: stdout on failure: {}", String::from_utf8_lossy(&out.stdout));
+}

@@ -12,7 +12,7 @@ mod scratch;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use cli::{assert_fails, stderr};
+use cli::{assert_fails, run_with_closed_pipe, stderr, Pipe};
 use scratch::Scratch;
 
 /// Runs the binary with a time limit (a hang is a bug, not a stuck test run).
@@ -190,15 +190,8 @@ fn closed_stderr_pipe_is_not_a_panic() {
         vec!["reconstruct", &cloud, "-o", &o3],
         vec!["dataset", "--out", &ds, "--synthetic", "1"],
     ] {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_point2quad"))
-            .args(&args)
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("test: run the binary");
-        drop(child.stderr.take());
-        let status = child.wait().expect("test: wait");
-        assert_eq!(status.code(), Some(0), "{args:?}");
+        let out = run_with_closed_pipe(&args, Pipe::Stderr);
+        assert_eq!(out.status.code(), Some(0), "{args:?}");
     }
 }
 

@@ -16,7 +16,7 @@ use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use cli::{assert_fails, stderr};
+use cli::{assert_fails, run_with_closed_pipe, stderr, Pipe};
 use quality_common::{check_xml, parse_json, Json};
 use scratch::Scratch;
 
@@ -571,14 +571,7 @@ fn closed_stdout_pipe_is_not_a_panic() {
     let input = dir.write("big.obj", s.as_bytes());
     for args in [vec!["eval", input.as_str()], vec!["eval", input.as_str(), "--json"], vec!["eval", "--help"]]
     {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_point2quad"))
-            .args(&args)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("test: run the binary");
-        drop(child.stdout.take());
-        let out = child.wait_with_output().expect("test: wait");
+        let out = run_with_closed_pipe(&args, Pipe::Stdout);
         let err = stderr(&out);
         assert!(!err.contains("panicked") && !err.contains("Broken pipe"), "{args:?}: {err}");
         assert_eq!(out.status.code(), Some(0), "{args:?}: {err}");

@@ -23,3 +23,28 @@ pub fn assert_fails(out: &Output, code: i32, needles: &[&str], what: &str) {
     }
     assert!(out.stdout.is_empty(), "{what}: stdout on failure: {}", String::from_utf8_lossy(&out.stdout));
 }
+
+/// Which of the child's output pipes [`run_with_closed_pipe`] closes before it writes.
+#[derive(Clone, Copy, Debug)]
+pub enum Pipe {
+    Stdout,
+    Stderr,
+}
+
+/// Runs the binary with `args` and the `closed` pipe's read end dropped at once (a
+/// consumer that went away, `| head`); returns what it left: exit status and the
+/// other pipe's text.
+pub fn run_with_closed_pipe(args: &[&str], closed: Pipe) -> Output {
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_point2quad"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("test: run the binary");
+    match closed {
+        Pipe::Stdout => drop(child.stdout.take()),
+        Pipe::Stderr => drop(child.stderr.take()),
+    }
+    child.wait_with_output().expect("test: wait")
+}

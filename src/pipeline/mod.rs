@@ -9,4 +9,5 @@ pub mod model;
 pub mod noise;
 pub mod normals;
 pub mod reconstruct;
+pub mod refine;
 pub mod train;

@@ -21,6 +21,7 @@ use crate::nn::checkpoint::{self, Checkpoint, TrainState};
 use crate::nn::conv1d::{Conv1d, ConvBnAct};
 use crate::nn::kpfcnn::{prepare, BlockKind, InputFeatures, Kpfcnn, KpfcnnConfig};
 use crate::nn::module::{Module, ResidualBlock};
+use crate::pipeline::refine::Refiner;
 use crate::rng::Rng;
 use crate::spatial::neighborhoods::NeighborCap;
 use crate::tensor::{Act, Graph, ParamStore, Tensor, Var};
@@ -57,6 +58,11 @@ pub struct ModelConfig {
     pub leaky_slope: f32,
     /// Batch-norm momentum (PyTorch convention).
     pub bn_momentum: f32,
+    /// Refinement rounds after the classifier ([`crate::pipeline::refine`]; 0: none).
+    /// Presets have none: `point2quad train-refine` adds them to a trained model.
+    pub refine_rounds: usize,
+    /// Hidden widths of each refinement round's MLP.
+    pub refine_widths: Vec<usize>,
 }
 
 impl ModelConfig {
@@ -74,6 +80,8 @@ impl ModelConfig {
             classifier_widths: vec![512, 256, 128, 64],
             leaky_slope: 0.1,
             bn_momentum: 0.02,
+            refine_rounds: 0,
+            refine_widths: Vec::new(),
         }
     }
 
@@ -92,6 +100,8 @@ impl ModelConfig {
             classifier_widths: vec![128, 64, 32],
             leaky_slope: 0.1,
             bn_momentum: 0.1,
+            refine_rounds: 0,
+            refine_widths: Vec::new(),
         }
     }
 
@@ -144,8 +154,17 @@ impl ModelConfig {
     /// `point_dim` (or the reverse), its `out_dim` differing from `point_dim`, or an
     /// invalid KPFCNN config.
     pub fn validate(&self) -> Result<()> {
-        if self.face_widths.contains(&0) || self.classifier_widths.contains(&0) {
+        if self.face_widths.contains(&0)
+            || self.classifier_widths.contains(&0)
+            || self.refine_widths.contains(&0)
+        {
             return Err(Error::invalid("model config: zero width"));
+        }
+        if self.refine_rounds > MAX_REFINE_ROUNDS {
+            return Err(Error::invalid(format!(
+                "model config: {} refinement rounds (at most {MAX_REFINE_ROUNDS})",
+                self.refine_rounds
+            )));
         }
         match (&self.point_encoder, self.point_dim) {
             (None, 0) => Ok(()),
@@ -177,6 +196,13 @@ impl ModelConfig {
         );
         if self.local_frame {
             t += "local_frame = true\n";
+        }
+        if self.refine_rounds > 0 {
+            t += &format!(
+                "refine_rounds = {}\nrefine_widths = {}\n",
+                self.refine_rounds,
+                list(&self.refine_widths)
+            );
         }
         if let Some(k) = &self.point_encoder {
             let blocks: Vec<&str> = k.blocks.iter().map(|&b| block_name(b)).collect();
@@ -222,6 +248,7 @@ impl ModelConfig {
         let mut face_in = None;
         let mut seen: Vec<&str> = Vec::new();
         let mut kp_seen = 0usize;
+        let mut optional_seen = 0usize;
         for (i, line) in text.lines().enumerate() {
             let line = line.trim();
             if line.is_empty() || line.starts_with('#') {
@@ -251,6 +278,14 @@ impl ModelConfig {
                 "classifier_widths" => c.classifier_widths = usize_list(v)?,
                 "leaky_slope" => c.leaky_slope = num(v)?,
                 "bn_momentum" => c.bn_momentum = num(v)?,
+                "refine_rounds" => {
+                    c.refine_rounds = int(v)?;
+                    optional_seen += 1;
+                }
+                "refine_widths" => {
+                    c.refine_widths = usize_list(v)?;
+                    optional_seen += 1;
+                }
                 _ if k.starts_with("kp_") => {
                     match k {
                         "kp_blocks" => {
@@ -292,7 +327,7 @@ impl ModelConfig {
             }
             seen.push(k);
         }
-        if seen.len() - kp_seen < 7 {
+        if seen.len() - kp_seen - optional_seen < 7 {
             return Err(Error::parse(name, 0, "model config: missing keys"));
         }
         if c.point_dim > 0 {
@@ -325,6 +360,9 @@ impl ModelConfig {
     }
 }
 
+/// Most refinement rounds a config may ask for.
+pub const MAX_REFINE_ROUNDS: usize = 8;
+
 /// Number of `kp_*` keys [`ModelConfig::to_text`] writes for a point encoder.
 const KP_KEYS: usize = 12;
 
@@ -353,6 +391,7 @@ pub struct Network {
     classifier: Vec<ConvBnAct>,
     head: Conv1d,
     point: Option<Kpfcnn>,
+    refine: Option<Refiner>,
 }
 
 /// A network with its parameters.
@@ -409,7 +448,14 @@ impl Model {
             }
             None => None,
         };
-        Ok(Model { net: Network { config, face, residual, classifier, head, point }, params })
+        // Last of all, so a model with refinement rounds draws the classifier's initial
+        // weights of the same model without them.
+        let refine = if config.refine_rounds > 0 {
+            Some(Refiner::new(&mut params, config.refine_rounds, &config.refine_widths, &mut rng)?)
+        } else {
+            None
+        };
+        Ok(Model { net: Network { config, face, residual, classifier, head, point, refine }, params })
     }
 
     /// The network's shape.
@@ -435,6 +481,19 @@ impl Model {
                 msg: "point-encoder models need predict_with_points".into(),
             });
         }
+        if self.net.refine.is_some() {
+            return Err(Error::Shape {
+                op: "predict",
+                msg:
+                    "models with refinement rounds need predict_with_points (the rounds read the candidates)"
+                        .into(),
+            });
+        }
+        self.classify(face_features)
+    }
+
+    /// The classifier's probabilities of a model without point encoder (no refinement).
+    fn classify(&self, face_features: &[f32]) -> Result<Vec<f32>> {
         let m = self.rows(face_features)?;
         if m == 0 {
             return Ok(Vec::new());
@@ -461,6 +520,61 @@ impl Model {
         corners: &[[u32; 4]],
         face_features: &[f32],
     ) -> Result<Vec<f32>> {
+        let base = self.predict_base(points, corners, face_features)?;
+        match &self.net.refine {
+            Some(r) => r.apply(&self.params, corners, &base, points.len()),
+            None => Ok(base),
+        }
+    }
+
+    /// The refinement rounds, when the model has any.
+    pub fn refiner(&self) -> Option<&Refiner> {
+        self.net.refine.as_ref()
+    }
+
+    /// The refinement rounds with the parameter store mutable (for training them).
+    pub fn refiner_and_params_mut(&mut self) -> Option<(&Refiner, &mut ParamStore)> {
+        let Model { net, params } = self;
+        net.refine.as_ref().map(|r| (r, params))
+    }
+
+    /// This model's classifier (and point encoder) with `rounds` fresh refinement
+    /// rounds of hidden `widths` (initialised from `seed`; any rounds `self` had are
+    /// dropped). Its probabilities equal `self`'s classifier's until the rounds are
+    /// trained ([`crate::pipeline::refine::train_refiner`]).
+    ///
+    /// # Errors
+    /// `InvalidInput` for a zero width or more than [`MAX_REFINE_ROUNDS`] rounds.
+    pub fn with_refinement(&self, rounds: usize, widths: &[usize], seed: u64) -> Result<Model> {
+        let config =
+            ModelConfig { refine_rounds: rounds, refine_widths: widths.to_vec(), ..self.net.config.clone() };
+        let mut out = Model::new(config, seed)?;
+        for id in self.params.ids() {
+            let name = self.params.name(id);
+            if name.starts_with("refine.") {
+                continue;
+            }
+            let to =
+                out.params.find(name).ok_or_else(|| Error::invalid(format!("parameter '{name}' missing")))?;
+            out.params.set(to, self.params.get(id).clone())?;
+        }
+        if let Some(kp) = &mut out.net.point {
+            kp.load_kernel_points(&out.params)?;
+        }
+        Ok(out)
+    }
+
+    /// The classifier's own probabilities (what [`Model::predict_with_points`] gives
+    /// before any refinement round): the input of refinement training.
+    ///
+    /// # Errors
+    /// As [`Model::predict_with_points`].
+    pub fn predict_base(
+        &self,
+        points: &[[f32; 3]],
+        corners: &[[u32; 4]],
+        face_features: &[f32],
+    ) -> Result<Vec<f32>> {
         let m = self.rows(face_features)?;
         if m != corners.len() {
             return Err(Error::Shape {
@@ -469,7 +583,7 @@ impl Model {
             });
         }
         let Some(kp) = &self.net.point else {
-            return self.predict(face_features);
+            return self.classify(face_features);
         };
         check_corners(corners, points.len())?;
         if m == 0 {

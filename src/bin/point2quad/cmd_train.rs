@@ -71,11 +71,13 @@ const SPEC: Spec = Spec {
     switches: &["--no-rotate", "--no-augment"],
 };
 
-fn fnv(s: &str) -> u64 {
+/// FNV-1a 64 of a sample name: the validation split is `fnv(name) % 10000 / 10000 < F`.
+pub(crate) fn fnv(s: &str) -> u64 {
     s.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
 }
 
-fn load_dir(dir: &Path) -> Result<Vec<Sample>> {
+/// Every `.p2qs` sample of `dir`, by file name.
+pub(crate) fn load_dir(dir: &Path) -> Result<Vec<Sample>> {
     let rd = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
     let mut files: Vec<PathBuf> = Vec::new();
     for e in rd {

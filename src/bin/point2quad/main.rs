@@ -6,6 +6,7 @@ mod cmd_candidates;
 mod cmd_dataset;
 mod cmd_eval;
 mod cmd_reconstruct;
+mod cmd_refine;
 mod cmd_render;
 mod cmd_repair;
 mod cmd_synth;
@@ -29,6 +30,7 @@ COMMANDS:
     eval         PRED --gt GT [--json]     mesh quality and accuracy metrics
     dataset      --out DIR [--synthetic N] [--meshes DIR] [--noise 0.1] [--seed S]
     train        --data DIR --out MODEL [--config default|default_kp|paper] [--epochs N] [--resume CKPT]
+    refine       --data DIR --model BASE --out MODEL [--rounds 2]   train refinement rounds
     repair       MESH -o OUT.{obj,ply,off} post-process and hole-fill a quad mesh or face soup
     render       MESH -o OUT.svg           shaded SVG picture of a mesh
     synth        -o CLOUD.xyz [--gt GT.obj] synthetic noisy cloud + ground-truth quad mesh
@@ -70,6 +72,7 @@ fn main() -> ExitCode {
         "eval" => (cmd_eval::HELP, cmd_eval::run),
         "dataset" => (cmd_dataset::HELP, cmd_dataset::run),
         "train" => (cmd_train::HELP, cmd_train::run),
+        "refine" => (cmd_refine::HELP, cmd_refine::run),
         "repair" => (cmd_repair::HELP, cmd_repair::run),
         "render" => (cmd_render::HELP, cmd_render::run),
         "synth" => (cmd_synth::HELP, cmd_synth::run),

@@ -1,0 +1,167 @@
+//! `point2quad refine`: adds refinement rounds to a trained model and trains them on
+//! the classifier's own probabilities over a dataset (the classifier stays frozen).
+
+use crate::args::{Args, Spec};
+use crate::cmd_train::{fnv, load_dir};
+use crate::output::say;
+use point2quad::nn::checkpoint;
+use point2quad::pipeline::model::{Model, MAX_REFINE_ROUNDS};
+use point2quad::pipeline::refine::{train_refiner, RefineProgress, RefineSample, RefineTrainConfig};
+use point2quad::pipeline::train::sample_input;
+use point2quad::{Error, Result};
+use std::path::{Path, PathBuf};
+
+pub const HELP: &str = "\
+point2quad refine: train refinement rounds on top of a trained classifier
+
+USAGE:
+    point2quad refine --data DIR --model BASE --out MODEL [OPTIONS]
+
+Scores every candidate of the .p2qs samples in DIR with BASE's classifier, then
+trains ROUNDS small MLPs one after the other: each reads, per candidate, its current
+probability and those of its rivals and neighbours (the best other candidate on
+each directed edge, across each edge, over its diagonals, the probability mass at
+its corners) and gives a new probability. BASE's classifier (and point encoder) is
+copied unchanged; rounds BASE already had are replaced. The validation split is
+train's (same hash of the sample name, same --val-fraction), so use the dataset
+BASE was trained on. MODEL is written atomically at the end (a run takes minutes).
+
+OPTIONS:
+    --data DIR            dataset folder (required)
+    --model BASE          trained weights (required)
+    --out MODEL           output weights (required)
+    --rounds N            refinement rounds, 1..8 [2]
+    --widths W,W          hidden widths of each round's MLP [32,32]
+    --epochs N            passes over the training candidates per round, 1..1000 [4]
+    --batch B             candidates per step, 1..1000000 [4096]
+    --lr X                initial learning rate (x0.1 over a round) [0.1]
+    --seed S              initialisation and shuffling seed [0]
+    --val-fraction F      share of samples held out for validation [0.15]
+";
+
+const SPEC: Spec = Spec {
+    valued: &[
+        "--data",
+        "--model",
+        "--out",
+        "--rounds",
+        "--widths",
+        "--epochs",
+        "--batch",
+        "--lr",
+        "--seed",
+        "--val-fraction",
+    ],
+    switches: &[],
+};
+
+fn parse_widths(v: &str) -> Result<Vec<usize>> {
+    let bad = || {
+        Error::Usage(format!(
+            "refine: --widths {v:?}: expected positive widths like 32,32 (at most 1024 each)"
+        ))
+    };
+    if v.trim().is_empty() {
+        return Ok(Vec::new());
+    }
+    let w: Vec<usize> =
+        v.split(',').map(|x| x.trim().parse::<usize>().map_err(|_| bad())).collect::<Result<_>>()?;
+    if w.is_empty() || w.len() > 8 || w.iter().any(|&x| x == 0 || x > 1024) {
+        return Err(bad());
+    }
+    Ok(w)
+}
+
+pub fn run(argv: &[String]) -> Result<()> {
+    let cmd = "refine";
+    let a = Args::parse(cmd, argv, &SPEC)?;
+    a.expect_positional(cmd, 0, "no positional arguments")?;
+    let data = PathBuf::from(a.required(cmd, "--data")?);
+    let base_path = PathBuf::from(a.required(cmd, "--model")?);
+    let out = PathBuf::from(a.required(cmd, "--out")?);
+    let rounds = a.parsed_in(cmd, "--rounds", 2usize, 1, MAX_REFINE_ROUNDS, "refinement rounds")?;
+    let widths = parse_widths(a.value("--widths").unwrap_or("32,32"))?;
+    let mut cfg = RefineTrainConfig::default();
+    cfg.epochs = a.parsed_in(cmd, "--epochs", cfg.epochs, 1, 1000, "passes per round")?;
+    cfg.batch = a.parsed_in(cmd, "--batch", 4096usize, 1, 1_000_000, "candidates per step")?;
+    cfg.sgd.lr = a.parsed(cmd, "--lr", 0.1f32)?;
+    if !(cfg.sgd.lr.is_finite() && cfg.sgd.lr > 0.0) {
+        return Err(Error::Usage(format!("refine: --lr must be a finite number > 0, got {}", cfg.sgd.lr)));
+    }
+    cfg.seed = a.parsed(cmd, "--seed", 0u64)?;
+    let val_fraction: f64 = a.parsed(cmd, "--val-fraction", 0.15)?;
+    if !(0.0..1.0).contains(&val_fraction) {
+        return Err(Error::Usage(format!("refine: --val-fraction must be in [0, 1), got {val_fraction}")));
+    }
+    crate::output::check_output_path(&out)?;
+    let base = Model::load(&base_path)?;
+    let mut model = base.with_refinement(rounds, &widths, cfg.seed)?;
+
+    let t0 = std::time::Instant::now();
+    let samples = load_dir(&data)?;
+    let fin = base.config().face_in();
+    let (mut tr, mut va) = (Vec::new(), Vec::new());
+    for (i, s) in samples.iter().enumerate() {
+        if !s.candidates.is_empty() && (s.feature_dim as usize) < fin {
+            return Err(Error::invalid(format!(
+                "sample {}: {} features per candidate, the model reads {fin}",
+                s.name, s.feature_dim
+            )));
+        }
+        let x = sample_input(s, fin);
+        let p = base
+            .predict_base(&s.points, &s.candidates, &x)
+            .map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))?;
+        let rs = RefineSample {
+            name: s.name.clone(),
+            n_points: s.points.len(),
+            quads: s.candidates.clone(),
+            labels: s.labels.clone(),
+            base: p,
+        };
+        if (fnv(&s.name) % 10_000) as f64 / 10_000.0 < val_fraction {
+            va.push(rs);
+        } else {
+            tr.push(rs);
+        }
+        crate::output::stderr(&format!("\rrefine: scored {}/{} samples   ", i + 1, samples.len()));
+    }
+    drop(samples);
+    let cands: usize = tr.iter().map(|s| s.quads.len()).sum();
+    say!(
+        "\rrefine: {} training / {} validation samples ({cands} training candidates) scored in {:.1}s; {rounds} round(s) of widths {widths:?}",
+        tr.len(),
+        va.len(),
+        t0.elapsed().as_secs_f64()
+    );
+    if tr.is_empty() {
+        return Err(Error::Usage("refine: every sample fell into validation; lower --val-fraction".into()));
+    }
+    let t1 = std::time::Instant::now();
+    let mut progress = |p: RefineProgress| match p {
+        RefineProgress::Epoch { round, epoch, loss } => {
+            crate::output::stderr(&format!(
+                "\rround {round}/{rounds} epoch {epoch}/{}: loss {loss:.4}, {:.0}s   ",
+                cfg.epochs,
+                t1.elapsed().as_secs_f64()
+            ));
+        }
+        RefineProgress::Round(r) => say!(
+            "\rround {}: loss {:.4}; validation P/R at 0.5 and AP {:.3}/{:.3}/{:.4} -> {:.3}/{:.3}/{:.4}",
+            r.round,
+            r.loss,
+            r.val_before.precision,
+            r.val_before.recall,
+            r.val_before.average_precision,
+            r.val_after.precision,
+            r.val_after.recall,
+            r.val_after.average_precision
+        ),
+    };
+    let (refiner, params) =
+        model.refiner_and_params_mut().ok_or_else(|| Error::invalid("no refinement rounds"))?;
+    train_refiner(refiner, params, &tr, &va, &cfg, &mut progress)?;
+    checkpoint::save(Path::new(&out), &model.to_checkpoint(None))?;
+    say!("refine: done in {:.1} min; weights in {}", t0.elapsed().as_secs_f64() / 60.0, out.display());
+    Ok(())
+}

@@ -238,7 +238,9 @@ fn clean_errors_on_empty_and_missing_inputs() {
 
 #[test]
 fn help_on_every_command() {
-    for cmd in ["reconstruct", "candidates", "eval", "dataset", "train", "repair", "render", "synth"] {
+    for cmd in
+        ["reconstruct", "candidates", "eval", "dataset", "train", "refine", "repair", "render", "synth"]
+    {
         for flag in ["--help", "-h"] {
             let out = ok(&[cmd, flag]);
             let text = String::from_utf8_lossy(&out.stdout);
@@ -326,4 +328,66 @@ fn reconstruct_bounds_k() {
     );
     assert!(err.contains("p.svg"), "{err}");
     assert!(!Path::new(&s.p("o.obj")).exists(), "mesh left behind");
+}
+
+/// `refine` end to end on the tiny data: the rounds train, the weights file is
+/// written, `reconstruct --model` reads it and gives a valid mesh; bad options and
+/// inputs are usage or data errors that write nothing.
+#[test]
+fn refine_trains_rounds_that_reconstruct_reads() {
+    let s = Scratch::new("refine");
+    let model = trained(&s);
+    let data = s.p("data");
+    let refined = s.p("r.p2qm");
+    let out = ok(&[
+        "refine",
+        "--data",
+        &data,
+        "--model",
+        &model,
+        "--out",
+        &refined,
+        "--rounds",
+        "2",
+        "--widths",
+        "4",
+        "--epochs",
+        "1",
+        "--val-fraction",
+        "0.5",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("round 1:") && err.contains("round 2:") && err.contains("AP"), "{err}");
+    let m = point2quad::pipeline::model::Model::load(Path::new(&refined)).unwrap();
+    assert_eq!(m.config().refine_rounds, 2);
+    assert_eq!(m.config().refine_widths, vec![4]);
+    let cloud = s.p("cloud.xyz");
+    ok(&["synth", "--from", &s.p("meshes/b_torus.obj"), "-o", &cloud, "--seed", "2"]);
+    let mesh = s.p("out.obj");
+    ok(&["reconstruct", &cloud, "-o", &mesh, "--model", &refined, "--threshold", "0"]);
+    let pm = point2quad::io::mesh_io::read_mesh(Path::new(&mesh)).unwrap();
+    let q = pm.to_quads().expect("pure quad");
+    validate(&HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).expect("manifold")).expect("valid");
+    // Bad options: usage errors naming the option; nothing written.
+    let never = s.p("never.p2qm");
+    for (opt, val) in [
+        ("--rounds", "0"),
+        ("--rounds", "9"),
+        ("--widths", "0"),
+        ("--widths", "a,b"),
+        ("--epochs", "0"),
+        ("--batch", "0"),
+        ("--lr", "nan"),
+        ("--val-fraction", "1"),
+    ] {
+        let err = fails(&["refine", "--data", &data, "--model", &model, "--out", &never, opt, val], 2);
+        assert!(err.contains(opt), "{opt} {val}: {err}");
+    }
+    let err = fails(&["refine", "--data", &data, "--out", &never], 2);
+    assert!(err.contains("--model"), "{err}");
+    let err = fails(&["refine", "--data", &data, "--model", &s.p("missing.p2qm"), "--out", &never], 1);
+    assert!(err.contains("missing.p2qm"), "{err}");
+    let err = fails(&["refine", "--data", &s.p("nowhere"), "--model", &model, "--out", &never], 1);
+    assert!(err.contains("nowhere"), "{err}");
+    assert!(!Path::new(&never).exists());
 }

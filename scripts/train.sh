@@ -3,10 +3,12 @@
 # Data: 80 synthetic shapes (seed 7) + every mesh of ../shared/data/quads/train when
 # present (never eval/ or large/), 10% noise points; then 40 epochs of the default
 # preset, seed 0. Resumes from out/train/model.p2qm.ckpt if a run was interrupted.
+# Then 2 refinement rounds (`point2quad refine`, seed 0, a few minutes) on the same
+# data over the trained classifier; the refined weights are the shipped ones.
 set -euo pipefail
 BIN=${1:-target/release/point2quad}
 EPOCHS=${EPOCHS:-40}
-DATA=out/train/data; MODEL=out/train/model.p2qm
+DATA=out/train/data; MODEL=out/train/model.p2qm; REFINED=out/train/refined.p2qm
 mkdir -p out/train
 if [ ! -f "$DATA/index.txt" ]; then
   MESHES=()
@@ -18,5 +20,6 @@ fi
 RESUME=()
 [ -f "$MODEL.ckpt" ] && RESUME=(--resume "$MODEL.ckpt")
 "$BIN" train --data "$DATA" --out "$MODEL" --config default --epochs "$EPOCHS" --seed 0 "${RESUME[@]}"
-cp "$MODEL" fixtures/point2quad-default.p2qm
+"$BIN" refine --data "$DATA" --model "$MODEL" --out "$REFINED" --rounds 2 --seed 0
+cp "$REFINED" fixtures/point2quad-default.p2qm
 echo "train: weights copied to fixtures/point2quad-default.p2qm"

@@ -114,8 +114,18 @@ pub fn reconstruct_with_report(
     clock.lap(&mut report, "features");
     // The point encoder (if the model has one) reads the same normalised cloud the
     // candidates were built in, as in training.
-    let probs = model.predict_with_points(&local, &cands.quads, &x)?;
+    let base = model.predict_base(&local, &cands.quads, &x)?;
     clock.lap(&mut report, "classify");
+    // Refinement rounds (when the model has them) rescore every candidate by its
+    // rivals and neighbours: the same as `predict_with_points`, timed apart.
+    let probs = match model.refiner() {
+        Some(r) => {
+            let p = r.apply(&model.params, &cands.quads, &base, local.len())?;
+            clock.lap(&mut report, "refine");
+            p
+        }
+        None => base,
+    };
     let mut faces = Vec::new();
     let mut face_probs = Vec::new();
     for (q, &p) in cands.quads.iter().zip(&probs) {

@@ -146,6 +146,13 @@ fn features_refuse_bad_inputs() {
     assert!(refine_features(&q, &[0.5], &[0.5], 3).unwrap_err().to_string().contains("candidate 0"));
     assert!(refine_features(&q, &[0.5, 0.1], &[0.5], 4).is_err());
     assert!(refine_features(&[], &[], &[], 0).unwrap().is_empty());
+    let err = refine_features(&[[0, 1, 2, 3], [4, 5, 4, 6]], &[0.5, 0.5], &[0.5, 0.5], 7).unwrap_err();
+    assert!(err.to_string().contains("candidate 1") && err.to_string().contains("repeats"), "{err}");
+    for bad in [f32::NAN, -0.1, 1.5, f32::INFINITY] {
+        let err = refine_features(&q, &[bad], &[0.5], 4).unwrap_err();
+        assert!(err.to_string().contains("candidate 0"), "{bad}: {err}");
+        assert!(refine_features(&q, &[0.5], &[bad], 4).is_err());
+    }
 }
 
 /// A model with rounds keeps the classifier bit for bit, and its weights file and

@@ -904,7 +904,8 @@ mod tests {
     fn shipped_weights_load_and_reserialise_bit_exactly() {
         let bytes = include_bytes!("../../fixtures/point2quad-default.p2qm");
         let m = Model::from_bytes(bytes, Path::new("fixture")).unwrap();
-        let want = ModelConfig { refine_rounds: 2, refine_widths: vec![32, 32], ..ModelConfig::default_preset() };
+        let want =
+            ModelConfig { refine_rounds: 2, refine_widths: vec![32, 32], ..ModelConfig::default_preset() };
         assert_eq!(m.config(), &want);
         assert_eq!(m.to_checkpoint(None).to_bytes(), bytes.to_vec());
     }

@@ -35,58 +35,124 @@ fn logit(p: f32) -> f32 {
     (p / (1.0 - p)).ln()
 }
 
-fn pair_key(a: u32, b: u32) -> u64 {
-    ((a as u64) << 32) | b as u64
+/// Candidates grouped by what they share, built once per candidate set: the
+/// candidates holding each directed edge, and those holding each unordered pair of
+/// points (as an edge or a diagonal). Each refinement round then only reads the
+/// groups' best probabilities ([`CandidateGraph::features`]).
+#[derive(Clone, Debug)]
+pub struct CandidateGraph {
+    quads: Vec<[u32; 4]>,
+    n_points: usize,
+    /// Directed edges: members (candidate ids) grouped by edge, and group starts.
+    dir_members: Vec<u32>,
+    dir_start: Vec<u32>,
+    /// Per candidate edge `4·c + i`: the group of (q_i → q_{i+1}), and of the reversed
+    /// edge (`NONE` when no candidate has it).
+    dir_group: Vec<u32>,
+    rev_group: Vec<u32>,
+    /// Unordered pairs: members grouped by pair, group starts; per `6·c + j` the group
+    /// of pair j (edges 0–3, then the diagonals (q0, q2), (q1, q3)).
+    pair_members: Vec<u32>,
+    pair_start: Vec<u32>,
+    pair_group: Vec<u32>,
 }
 
-fn unordered(a: u32, b: u32) -> u64 {
-    if a < b {
-        pair_key(a, b)
-    } else {
-        pair_key(b, a)
-    }
+/// "No group" (a reversed edge no candidate has).
+const NONE: u32 = u32::MAX;
+
+/// Entries `(a, b, slot)` grouped by the pair (a, b): by a counting sort on `a`
+/// (points index below `n`), then a sort on (b, slot) within each point's bucket, so
+/// members of a group are in slot order.
+struct Groups {
+    /// Member candidates (`slot / per`), group after group.
+    members: Vec<u32>,
+    /// Group starts in `members` (one more than the groups).
+    start: Vec<u32>,
+    /// Per slot: its group.
+    of_slot: Vec<u32>,
+    /// Per group: its `b`.
+    second: Vec<u32>,
+    /// Per point `a`: the range of its groups (`n + 1` offsets).
+    by_first: Vec<u32>,
 }
 
-/// Per key: the two best (value, owner) among the entries with that key.
-struct Best2 {
-    keys: Vec<u64>,
-    top: Vec<(f32, u32, f32)>,
-}
-
-impl Best2 {
-    /// From (key, value, owner) entries.
-    fn new(mut e: Vec<(u64, f32, u32)>) -> Best2 {
-        e.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)).then(a.2.cmp(&b.2)));
-        let (mut keys, mut top) = (Vec::new(), Vec::new());
-        let mut i = 0;
-        while i < e.len() {
-            let mut j = i + 1;
-            while j < e.len() && e[j].0 == e[i].0 {
-                j += 1;
-            }
-            // Several entries of one owner under a key cannot happen for edges; for the
-            // pair table an owner appears once per pair as well (4 distinct corners).
-            let second = if j > i + 1 { e[i + 1].1 } else { 0.0 };
-            keys.push(e[i].0);
-            top.push((e[i].1, e[i].2, second));
-            i = j;
+impl Groups {
+    fn new(n: usize, entries: &[(u32, u32, u32)], per: u32) -> Groups {
+        let mut offs = vec![0u32; n + 1];
+        for &(a, _, _) in entries {
+            offs[a as usize + 1] += 1;
         }
-        Best2 { keys, top }
-    }
-
-    /// The best value under `key` among owners other than `me` (0 when none).
-    fn best_other(&self, key: u64, me: u32) -> f32 {
-        match self.keys.binary_search(&key) {
-            Ok(i) => {
-                let (v, owner, second) = self.top[i];
-                if owner == me {
-                    second
-                } else {
-                    v
+        for i in 0..n {
+            offs[i + 1] += offs[i];
+        }
+        let mut cursor = offs.clone();
+        let mut sorted = vec![(0u32, 0u32); entries.len()];
+        for &(a, b, slot) in entries {
+            let c = &mut cursor[a as usize];
+            sorted[*c as usize] = (b, slot);
+            *c += 1;
+        }
+        let mut members = Vec::with_capacity(entries.len());
+        let mut start = Vec::new();
+        let mut second = Vec::new();
+        let mut of_slot = vec![0u32; entries.len()];
+        let mut by_first = Vec::with_capacity(n + 1);
+        for a in 0..n {
+            by_first.push(start.len() as u32);
+            let bucket = &mut sorted[offs[a] as usize..offs[a + 1] as usize];
+            bucket.sort_unstable();
+            for (i, &(b, slot)) in bucket.iter().enumerate() {
+                if i == 0 || b != bucket[i - 1].0 {
+                    start.push(members.len() as u32);
+                    second.push(b);
                 }
+                of_slot[slot as usize] = (start.len() - 1) as u32;
+                members.push(slot / per);
             }
-            Err(_) => 0.0,
         }
+        by_first.push(start.len() as u32);
+        start.push(members.len() as u32);
+        Groups { members, start, of_slot, second, by_first }
+    }
+
+    /// The group of pair (a, b), `NONE` when no entry has it.
+    fn find(&self, a: u32, b: u32) -> u32 {
+        let (lo, hi) = (self.by_first[a as usize] as usize, self.by_first[a as usize + 1] as usize);
+        match self.second[lo..hi].binary_search(&b) {
+            Ok(i) => (lo + i) as u32,
+            Err(_) => NONE,
+        }
+    }
+}
+
+/// Per group: the best probability, its owner, and the best of the others.
+fn group_best(members: &[u32], start: &[u32], probs: &[f32]) -> Vec<(f32, u32, f32)> {
+    crate::par::map(start.len().saturating_sub(1), |g| {
+        let (mut top, mut owner, mut second) = (f32::NEG_INFINITY, NONE, 0.0f32);
+        for &c in &members[start[g] as usize..start[g + 1] as usize] {
+            let p = probs[c as usize];
+            if p > top {
+                second = second.max(top);
+                top = p;
+                owner = c;
+            } else if p > second {
+                second = p;
+            }
+        }
+        (top, owner, second)
+    })
+}
+
+/// The best probability in group `g` among candidates other than `me` (0 when none).
+fn best_other(best: &[(f32, u32, f32)], g: u32, me: u32) -> f32 {
+    if g == NONE {
+        return 0.0;
+    }
+    let (top, owner, second) = best[g as usize];
+    if owner == me {
+        second
+    } else {
+        top
     }
 }
 
@@ -95,10 +161,136 @@ fn sorted4(mut v: [f32; 4]) -> [f32; 4] {
     v
 }
 
+impl CandidateGraph {
+    /// Groups `quads` (corner indices below `n_points`).
+    ///
+    /// # Errors
+    /// `InvalidInput` naming the first candidate with a corner `>= n_points` or a
+    /// repeated corner, or for more than 2^29 candidates.
+    pub fn new(quads: &[[u32; 4]], n_points: usize) -> Result<CandidateGraph> {
+        crate::pipeline::model::check_corners(quads, n_points)?;
+        if let Some(c) = quads.iter().position(|q| (0..4).any(|i| (i + 1..4).any(|j| q[i] == q[j]))) {
+            return Err(Error::invalid(format!("candidate {c} {:?} repeats a corner", quads[c])));
+        }
+        let m = quads.len();
+        if m >= (1 << 29) {
+            return Err(Error::invalid("refine: more than 2^29 candidates"));
+        }
+        let mut dir = Vec::with_capacity(4 * m);
+        let mut pairs = Vec::with_capacity(6 * m);
+        for (c, q) in quads.iter().enumerate() {
+            let c = c as u32;
+            let lo_hi = |a: u32, b: u32| if a < b { (a, b) } else { (b, a) };
+            for i in 0..4 {
+                let (a, b) = (q[i], q[(i + 1) % 4]);
+                dir.push((a, b, 4 * c + i as u32));
+                let (lo, hi) = lo_hi(a, b);
+                pairs.push((lo, hi, 6 * c + i as u32));
+            }
+            let (lo, hi) = lo_hi(q[0], q[2]);
+            pairs.push((lo, hi, 6 * c + 4));
+            let (lo, hi) = lo_hi(q[1], q[3]);
+            pairs.push((lo, hi, 6 * c + 5));
+        }
+        let (dir, pairs) =
+            crate::par::join(|| Groups::new(n_points, &dir, 4), || Groups::new(n_points, &pairs, 6));
+        let rev_group = quads.iter().flat_map(|q| (0..4).map(|i| dir.find(q[(i + 1) % 4], q[i]))).collect();
+        let (dir_members, dir_start, dir_group) = (dir.members, dir.start, dir.of_slot);
+        let (pair_members, pair_start, pair_group) = (pairs.members, pairs.start, pairs.of_slot);
+        Ok(CandidateGraph {
+            quads: quads.to_vec(),
+            n_points,
+            dir_members,
+            dir_start,
+            dir_group,
+            rev_group,
+            pair_members,
+            pair_start,
+            pair_group,
+        })
+    }
+
+    /// Number of candidates.
+    pub fn len(&self) -> usize {
+        self.quads.len()
+    }
+
+    /// True when there is no candidate.
+    pub fn is_empty(&self) -> bool {
+        self.quads.is_empty()
+    }
+
+    /// The refinement input of every candidate ([`refine_features`] documents the
+    /// columns) from the current probabilities `probs` and the classifier's `base`.
+    ///
+    /// # Errors
+    /// `InvalidInput` when a length differs from the candidate count or a probability
+    /// is not a number in [0, 1] (naming the candidate).
+    pub fn features(&self, probs: &[f32], base: &[f32]) -> Result<Vec<f32>> {
+        let m = self.quads.len();
+        if probs.len() != m || base.len() != m {
+            return Err(Error::invalid(format!(
+                "refine features: {m} candidates, {} probabilities, {} base probabilities",
+                probs.len(),
+                base.len()
+            )));
+        }
+        for (what, v) in [("probability", probs), ("base probability", base)] {
+            if let Some(c) = v.iter().position(|p| !(0.0..=1.0).contains(p)) {
+                return Err(Error::invalid(format!("refine features: candidate {c} has {what} {}", v[c])));
+            }
+        }
+        let dir = group_best(&self.dir_members, &self.dir_start, probs);
+        let pair = group_best(&self.pair_members, &self.pair_start, probs);
+        let mut mass = vec![0.0f64; self.n_points];
+        let mut high = vec![0u32; self.n_points];
+        for (q, &p) in self.quads.iter().zip(probs) {
+            for &v in q {
+                mass[v as usize] += p as f64;
+                high[v as usize] += (p > 0.5) as u32;
+            }
+        }
+        let mut out = vec![0.0f32; m * REFINE_DIM];
+        crate::par::for_each_chunk_mut(&mut out, REFINE_DIM * 256, |ch, chunk| {
+            for (r, row) in chunk.chunks_exact_mut(REFINE_DIM).enumerate() {
+                let c = ch * 256 + r;
+                let (q, p) = (self.quads[c], probs[c]);
+                let me = c as u32;
+                let (mut rival, mut across, mut shared) = ([0.0f32; 4], [0.0f32; 4], [0.0f32; 4]);
+                let (mut at, mut hi) = ([0.0f32; 4], [0.0f32; 4]);
+                for i in 0..4 {
+                    rival[i] = best_other(&dir, self.dir_group[4 * c + i], me);
+                    across[i] = best_other(&dir, self.rev_group[4 * c + i], me);
+                    shared[i] = best_other(&pair, self.pair_group[6 * c + i], me);
+                    let a = q[i] as usize;
+                    at[i] = (mass[a] - p as f64) as f32;
+                    hi[i] = (high[a] - (p > 0.5) as u32) as f32 / 4.0;
+                }
+                let diff = [0, 1, 2, 3].map(|i| across[i] - rival[i]);
+                let diag = best_other(&pair, self.pair_group[6 * c + 4], me).max(best_other(
+                    &pair,
+                    self.pair_group[6 * c + 5],
+                    me,
+                ));
+                row[0] = logit(p);
+                row[1..5].copy_from_slice(&sorted4(rival));
+                row[5..9].copy_from_slice(&sorted4(across));
+                row[9..13].copy_from_slice(&sorted4(diff));
+                row[13] = diag;
+                row[14..18].copy_from_slice(&sorted4(at));
+                row[18..22].copy_from_slice(&sorted4(hi));
+                row[22..26].copy_from_slice(&sorted4(shared));
+                row[26] = logit(base[c]);
+            }
+        });
+        Ok(out)
+    }
+}
+
 /// The refinement input of every candidate, `M × REFINE_DIM` row-major, from the
 /// current probabilities `probs` and the classifier's own `base` (both one per
-/// candidate). `n_points` bounds the corner indices. Columns (each group of four sorted
-/// ascending; "other" = any candidate but this one):
+/// candidate, in [0, 1]). `n_points` bounds the corner indices. Columns (each group of
+/// four sorted ascending; "other" = any candidate but this one):
 ///
 /// * 0: logit of this candidate's current probability;
 /// * 1–4: per directed edge (q_i → q_{i+1}), the best other candidate with the same
@@ -114,70 +306,30 @@ fn sorted4(mut v: [f32; 4]) -> [f32; 4] {
 ///   either way, or as a diagonal);
 /// * 26: logit of the classifier's probability.
 ///
+/// ("Best" is the highest probability, 0 when there is none.) Rounds over one
+/// candidate set build the [`CandidateGraph`] once and call its `features`.
+///
 /// # Errors
-/// `InvalidInput` when the lengths differ or a corner index is `>= n_points`.
+/// As [`CandidateGraph::new`] and [`CandidateGraph::features`].
 pub fn refine_features(quads: &[[u32; 4]], probs: &[f32], base: &[f32], n_points: usize) -> Result<Vec<f32>> {
-    let m = quads.len();
-    if probs.len() != m || base.len() != m {
-        return Err(Error::invalid(format!(
-            "refine features: {m} candidates, {} probabilities, {} base probabilities",
-            probs.len(),
-            base.len()
-        )));
-    }
-    crate::pipeline::model::check_corners(quads, n_points)?;
-    if m > u32::MAX as usize {
-        return Err(Error::invalid("refine features: more than 2^32 candidates"));
-    }
-    let mut directed = Vec::with_capacity(4 * m);
-    let mut pairs = Vec::with_capacity(6 * m);
-    let mut mass = vec![0.0f64; n_points];
-    let mut high = vec![0u32; n_points];
-    for (c, (q, &p)) in quads.iter().zip(probs).enumerate() {
-        let c = c as u32;
-        for i in 0..4 {
-            let (a, b) = (q[i], q[(i + 1) % 4]);
-            directed.push((pair_key(a, b), p, c));
-            pairs.push((unordered(a, b), p, c));
-            mass[a as usize] += p as f64;
-            high[a as usize] += (p > 0.5) as u32;
+    CandidateGraph::new(quads, n_points)?.features(probs, base)
+}
+
+/// Dot product with 8 independent sums (so that it vectorises).
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0.0f32; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for k in 0..8 {
+            acc[k] += x[k] * y[k];
         }
-        pairs.push((unordered(q[0], q[2]), p, c));
-        pairs.push((unordered(q[1], q[3]), p, c));
     }
-    let directed = Best2::new(directed);
-    let pairs = Best2::new(pairs);
-    let mut out = vec![0.0f32; m * REFINE_DIM];
-    crate::par::for_each_chunk_mut(&mut out, REFINE_DIM * 256, |ch, chunk| {
-        for (r, row) in chunk.chunks_exact_mut(REFINE_DIM).enumerate() {
-            let c = ch * 256 + r;
-            let (q, p) = (quads[c], probs[c]);
-            let me = c as u32;
-            let (mut rival, mut across, mut shared) = ([0.0f32; 4], [0.0f32; 4], [0.0f32; 4]);
-            let (mut at, mut hi) = ([0.0f32; 4], [0.0f32; 4]);
-            for i in 0..4 {
-                let (a, b) = (q[i], q[(i + 1) % 4]);
-                rival[i] = directed.best_other(pair_key(a, b), me);
-                across[i] = directed.best_other(pair_key(b, a), me);
-                shared[i] = pairs.best_other(unordered(a, b), me);
-                at[i] = (mass[a as usize] - p as f64) as f32;
-                hi[i] = (high[a as usize] - (p > 0.5) as u32) as f32 / 4.0;
-            }
-            let diff = [0, 1, 2, 3].map(|i| across[i] - rival[i]);
-            let diag =
-                pairs.best_other(unordered(q[0], q[2]), me).max(pairs.best_other(unordered(q[1], q[3]), me));
-            row[0] = logit(p);
-            row[1..5].copy_from_slice(&sorted4(rival));
-            row[5..9].copy_from_slice(&sorted4(across));
-            row[9..13].copy_from_slice(&sorted4(diff));
-            row[13] = diag;
-            row[14..18].copy_from_slice(&sorted4(at));
-            row[18..22].copy_from_slice(&sorted4(hi));
-            row[22..26].copy_from_slice(&sorted4(shared));
-            row[26] = logit(base[c]);
-        }
-    });
-    Ok(out)
+    let mut s = acc.iter().sum::<f32>();
+    for (x, y) in ra.iter().zip(rb) {
+        s += x * y;
+    }
+    s
 }
 
 /// One refinement round: input standardisation (stored buffers) and an MLP
@@ -257,17 +409,43 @@ impl Refiner {
         Ok(h)
     }
 
-    /// Round `r`'s probabilities from raw feature rows (inference).
+    /// Round `r`'s probabilities from raw feature rows (inference): the MLP row by row
+    /// (equal to [`Refiner::forward`] on standardised rows up to float rounding; a
+    /// `[M × 27]` GEMM through the tape is slower than these dot products).
     fn round_probs(&self, params: &ParamStore, r: usize, feats: Vec<f32>) -> Result<Vec<f32>> {
-        let m = feats.len() / REFINE_DIM;
-        if m == 0 {
-            return Ok(Vec::new());
+        let round = &self.rounds[r];
+        let mean = params.get(round.mean).data();
+        let scale = params.get(round.scale).data();
+        let layers: Vec<(&[f32], Option<&[f32]>, usize, usize)> = round
+            .layers
+            .iter()
+            .map(|l| (params.get(l.weight).data(), l.bias.map(|b| params.get(b).data()), l.cin, l.cout))
+            .collect();
+        let width = layers.iter().map(|l| l.2.max(l.3)).max().unwrap_or(0).max(REFINE_DIM);
+        if layers.last().map(|l| l.3) != Some(2) || feats.len() % REFINE_DIM != 0 {
+            return Err(Error::Shape { op: "refine", msg: "rows or last layer do not fit".into() });
         }
-        let x = self.standardise(params, r, feats);
-        let mut g = Graph::eval_shared(params);
-        let xv = g.input(Tensor::new(&[m, REFINE_DIM], x)?);
-        let logits = self.forward(&mut g, r, xv)?;
-        Ok(crate::pipeline::model::probabilities(g.value(logits).data()))
+        const ROWS: usize = 512;
+        let mut out = vec![0.0f32; feats.len() / REFINE_DIM];
+        crate::par::for_each_chunk_mut(&mut out, ROWS, |ch, chunk| {
+            let (mut x, mut y) = (vec![0.0f32; width], vec![0.0f32; width]);
+            for (i, o) in chunk.iter_mut().enumerate() {
+                let row = &feats[(ch * ROWS + i) * REFINE_DIM..][..REFINE_DIM];
+                for j in 0..REFINE_DIM {
+                    x[j] = (row[j] - mean[j]) * scale[j];
+                }
+                for (l, &(w, b, cin, cout)) in layers.iter().enumerate() {
+                    for (k, yk) in y[..cout].iter_mut().enumerate() {
+                        let v = dot(&w[k * cin..(k + 1) * cin], &x[..cin]) + b.map_or(0.0, |b| b[k]);
+                        *yk = if l + 1 < layers.len() { v.max(0.0) } else { v };
+                    }
+                    std::mem::swap(&mut x, &mut y);
+                }
+                let d = (x[0] - x[1]) as f64;
+                *o = (1.0 / (1.0 + d.exp())) as f32;
+            }
+        });
+        Ok(out)
     }
 
     /// Runs rounds `0..upto` from the classifier's probabilities `base`; returns the
@@ -283,9 +461,10 @@ impl Refiner {
         n_points: usize,
         upto: usize,
     ) -> Result<Vec<f32>> {
+        let graph = CandidateGraph::new(quads, n_points)?;
         let mut p = base.to_vec();
         for r in 0..upto.min(self.rounds.len()) {
-            let f = refine_features(quads, &p, base, n_points)?;
+            let f = graph.features(&p, base)?;
             p = self.round_probs(params, r, f)?;
         }
         Ok(p)
@@ -423,13 +602,26 @@ pub enum RefineProgress {
     Round(RoundReport),
 }
 
-fn all_features(refiner: &Refiner, samples: &[RefineSample], current: &[Vec<f32>]) -> Result<Vec<Vec<f32>>> {
-    let _ = refiner;
+fn all_features(
+    graphs: &[CandidateGraph],
+    samples: &[RefineSample],
+    current: &[Vec<f32>],
+) -> Result<Vec<Vec<f32>>> {
+    graphs
+        .iter()
+        .zip(samples)
+        .zip(current)
+        .map(|((g, s), p)| {
+            g.features(p, &s.base).map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))
+        })
+        .collect()
+}
+
+fn graphs_of(samples: &[RefineSample]) -> Result<Vec<CandidateGraph>> {
     samples
         .iter()
-        .zip(current)
-        .map(|(s, p)| {
-            refine_features(&s.quads, p, &s.base, s.n_points)
+        .map(|s| {
+            CandidateGraph::new(&s.quads, s.n_points)
                 .map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))
         })
         .collect()
@@ -467,12 +659,13 @@ pub fn train_refiner(
     }
     let labels: Vec<u8> = train.iter().flat_map(|s| s.labels.iter().copied()).collect();
     let val_labels: Vec<u8> = val.iter().flat_map(|s| s.labels.iter().copied()).collect();
+    let (train_graphs, val_graphs) = (graphs_of(train)?, graphs_of(val)?);
     let mut cur_train: Vec<Vec<f32>> = train.iter().map(|s| s.base.clone()).collect();
     let mut cur_val: Vec<Vec<f32>> = val.iter().map(|s| s.base.clone()).collect();
     let mut rng = Rng::new(cfg.seed);
     let mut reports = Vec::new();
     for r in 0..refiner.rounds.len() {
-        let x: Vec<f32> = all_features(refiner, train, &cur_train)?.concat();
+        let x: Vec<f32> = all_features(&train_graphs, train, &cur_train)?.concat();
         // Standardisation from the training rows (f64 sums).
         let (mut mean, mut sq) = (vec![0.0f64; REFINE_DIM], vec![0.0f64; REFINE_DIM]);
         for row in x.chunks_exact(REFINE_DIM) {
@@ -537,8 +730,8 @@ pub fn train_refiner(
         let next = |feats: Vec<Vec<f32>>| -> Result<Vec<Vec<f32>>> {
             feats.into_iter().map(|f| refiner.round_probs(params, r, f)).collect()
         };
-        cur_train = next(all_features(refiner, train, &cur_train)?)?;
-        cur_val = next(all_features(refiner, val, &cur_val)?)?;
+        cur_train = next(all_features(&train_graphs, train, &cur_train)?)?;
+        cur_val = next(all_features(&val_graphs, val, &cur_val)?)?;
         let report = RoundReport {
             round: r + 1,
             loss: last_loss,
@@ -549,4 +742,43 @@ pub fn train_refiner(
         reports.push(report);
     }
     Ok(reports)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The row-by-row inference equals the tape's forward on standardised rows (the
+    /// training path) up to float rounding, and a wrong weight would show.
+    #[test]
+    fn row_inference_equals_the_tape_forward() {
+        let mut params = ParamStore::new();
+        let mut rng = Rng::new(4);
+        let refiner = Refiner::new(&mut params, 2, &[32, 16], &mut rng).unwrap();
+        let m = 700;
+        let feats: Vec<f32> = (0..m * REFINE_DIM).map(|_| rng.uniform(-3.0, 3.0) as f32).collect();
+        let mean: Vec<f32> = (0..REFINE_DIM).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+        let scale: Vec<f32> = (0..REFINE_DIM).map(|_| rng.uniform(0.5, 2.0) as f32).collect();
+        params.set(refiner.rounds[1].mean, Tensor::new(&[REFINE_DIM], mean).unwrap()).unwrap();
+        params.set(refiner.rounds[1].scale, Tensor::new(&[REFINE_DIM], scale).unwrap()).unwrap();
+        let tape = |params: &ParamStore| {
+            let x = refiner.standardise(params, 1, feats.clone());
+            let mut g = Graph::eval_shared(params);
+            let xv = g.input(Tensor::new(&[m, REFINE_DIM], x).unwrap());
+            let logits = refiner.forward(&mut g, 1, xv).unwrap();
+            crate::pipeline::model::probabilities(g.value(logits).data())
+        };
+        let want = tape(&params);
+        let got = refiner.round_probs(&params, 1, feats.clone()).unwrap();
+        let worst = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        assert!(worst < 1e-5, "worst difference {worst}");
+        // A changed weight changes the answer well beyond that.
+        let w = refiner.rounds[1].layers[1].weight;
+        let mut t = params.get(w).clone();
+        t.data_mut()[3] += 0.5;
+        params.set(w, t).unwrap();
+        let moved = refiner.round_probs(&params, 1, feats).unwrap();
+        let diff = moved.iter().zip(&got).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        assert!(diff > 1e-3, "the check could not fail: {diff}");
+    }
 }

@@ -315,6 +315,9 @@ pub fn refine_features(quads: &[[u32; 4]], probs: &[f32], base: &[f32], n_points
     CandidateGraph::new(quads, n_points)?.features(probs, base)
 }
 
+/// A layer's weight `[cout × cin]`, bias, `cin` and `cout`, borrowed from the store.
+type LayerRef<'a> = (&'a [f32], Option<&'a [f32]>, usize, usize);
+
 /// Dot product with 8 independent sums (so that it vectorises).
 fn dot(a: &[f32], b: &[f32]) -> f32 {
     let mut acc = [0.0f32; 8];
@@ -416,7 +419,7 @@ impl Refiner {
         let round = &self.rounds[r];
         let mean = params.get(round.mean).data();
         let scale = params.get(round.scale).data();
-        let layers: Vec<(&[f32], Option<&[f32]>, usize, usize)> = round
+        let layers: Vec<LayerRef> = round
             .layers
             .iter()
             .map(|l| (params.get(l.weight).data(), l.bias.map(|b| params.get(b).data()), l.cin, l.cout))

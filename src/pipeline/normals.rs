@@ -4,10 +4,12 @@
 //! weight 1 − |n_i·n_j|, grown by Prim from one root per connected component, so the
 //! sign travels along the smoothest paths first.
 //!
-//! Outward rule, per connected component: the point farthest from the component's
-//! centroid (ties broken by coordinates) gets the normal pointing away from that
-//! centroid; when its normal is perpendicular to that direction (a flat patch) the
-//! normal's largest-magnitude coordinate is made positive instead.
+//! Outward rule, per connected component: after propagating the signs from a root (the
+//! point farthest from the component's centroid, ties broken by coordinates), the whole
+//! component is flipped if Σ n_v · (p_v − centroid) < 0, so closed surfaces face out
+//! and open ones take the side their bulk bulges to, whatever the pose; when the sum is
+//! near zero (a flat patch) the root normal's largest-magnitude coordinate is made
+//! positive instead.
 
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -211,24 +213,8 @@ pub fn orient_normals(points: &[[f32; 3]], knn: &KnnTable, normals: &mut [[f32; 
                 root = v as usize;
             }
         }
-        let p = points[root];
-        let d = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
-        let nr = normals[root];
-        let s = dot3(nr, d);
-        let flip = if s.abs() > 1e-3 * dot3(d, d).sqrt() {
-            s < 0.0
-        } else {
-            let mut big = 0;
-            for a in 1..3 {
-                if nr[a].abs() > nr[big].abs() {
-                    big = a;
-                }
-            }
-            nr[big] < 0.0
-        };
-        if flip {
-            normals[root] = [-nr[0], -nr[1], -nr[2]];
-        }
+        // The root keeps its PCA sign; the component's sign is decided after the
+        // propagation (below), from all its points.
         // Prim: the heap holds (weight bits, target, parent). Weights are ≥ 0, so
         // their f32 bit patterns order like the values.
         done[root] = true;
@@ -252,6 +238,36 @@ pub fn orient_normals(points: &[[f32; 3]], knn: &KnnTable, normals: &mut [[f32; 
                 normals[w] = [-m[0], -m[1], -m[2]];
             }
             push(&mut heap, w, normals, &done);
+        }
+        // Outward rule: the sign that makes Σ n_v · (p_v − c) positive. A sum over the
+        // whole component does not change with the pose (a rotation moves the normals
+        // and the offsets alike), unlike any one point's normal, which rounding can tip
+        // when it is nearly perpendicular to its offset. Near zero (a flat patch) the
+        // root's normal decides: its largest-magnitude coordinate positive.
+        let (mut sum, mut scale) = (0.0f64, 0.0f64);
+        for &v in members {
+            let (p, nv) = (points[v as usize], normals[v as usize]);
+            let d = [(p[0] - c[0]) as f64, (p[1] - c[1]) as f64, (p[2] - c[2]) as f64];
+            sum += nv[0] as f64 * d[0] + nv[1] as f64 * d[1] + nv[2] as f64 * d[2];
+            scale += (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        }
+        let flip = if sum.abs() > 1e-5 * scale {
+            sum < 0.0
+        } else {
+            let nr = normals[root];
+            let mut big = 0;
+            for a in 1..3 {
+                if nr[a].abs() > nr[big].abs() {
+                    big = a;
+                }
+            }
+            nr[big] < 0.0
+        };
+        if flip {
+            for &v in members {
+                let m = normals[v as usize];
+                normals[v as usize] = [-m[0], -m[1], -m[2]];
+            }
         }
     }
 }
@@ -297,6 +313,41 @@ mod tests {
         for n in &nrm {
             assert!((dot3(*n, *n) - 1.0).abs() < 1e-5);
             assert!(n[0].abs() < 1e-4, "normal {n:?} not perpendicular to the line");
+        }
+    }
+
+    /// An open wavy sheet with a slight bulge: the orientation must not depend on the
+    /// pose. Rotated 64 ways, every normal equals the rotated normal of the unrotated
+    /// sheet's (a pose-dependent rule, such as a fixed coordinate's sign, fails this).
+    /// The case where the earlier farthest-point rule flipped a whole sheet under a
+    /// similarity is a committed entry of `tests/candidates_props.proptest-regressions`.
+    #[test]
+    fn open_sheet_orientation_does_not_depend_on_the_pose() {
+        let mut pts = Vec::new();
+        for y in 0..9 {
+            for x in 0..12 {
+                let (px, py) = (x as f64 + 0.1 * ((x * 7 + y * 3) % 5) as f64, y as f64 * 1.3);
+                pts.push([px, py, 1.5 * (0.4 * px).sin() * (0.3 * py).cos()]);
+            }
+        }
+        let run = |p: &[[f64; 3]]| {
+            let f: Vec<[f32; 3]> = p.iter().map(|v| [v[0] as f32, v[1] as f32, v[2] as f32]).collect();
+            let knn = KdTree::build(&f).knn_batch(&f, 12);
+            let mut nrm = estimate_normals(&f, &knn);
+            orient_normals(&f, &knn, &mut nrm);
+            nrm
+        };
+        let base = run(&pts);
+        let mut rng = crate::rng::Rng::new(11);
+        for _ in 0..64 {
+            let r = rng.rotation();
+            let moved: Vec<[f64; 3]> = pts.iter().map(|&p| crate::math::mat_vec(&r, p)).collect();
+            let got = run(&moved);
+            for (i, (a, b)) in base.iter().zip(&got).enumerate() {
+                let ra = crate::math::mat_vec(&r, [a[0] as f64, a[1] as f64, a[2] as f64]);
+                let d = ra[0] * b[0] as f64 + ra[1] * b[1] as f64 + ra[2] * b[2] as f64;
+                assert!(d > 0.99, "point {i}: normal {b:?} vs rotated {ra:?}");
+            }
         }
     }
 }

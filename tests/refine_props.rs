@@ -185,6 +185,18 @@ fn refined_model_keeps_the_classifier_and_round_trips() {
     // Replacing the rounds of a refined model starts from its classifier again.
     let again = refined.with_refinement(1, &[4], 0).unwrap();
     assert_eq!(again.predict_base(&s.points, &s.candidates, &x).unwrap(), want);
+    // Config text with bad refinement keys: errors naming the line or the problem.
+    let plain = base.config().to_text();
+    for (extra, why) in [
+        ("refine_rounds = 9\nrefine_widths = 8\n", "rounds"),
+        ("refine_rounds = 2\nrefine_widths = 0\n", "zero width"),
+        ("refine_rounds = 2\nrefine_widths = a\n", "width list"),
+        ("refine_rounds = two\n", "number"),
+        ("refine_rounds = 1\nrefine_rounds = 1\n", "repeated"),
+    ] {
+        let err = ModelConfig::from_text(&format!("{plain}{extra}"), Path::new("cfg")).unwrap_err();
+        assert!(err.to_string().contains(why), "{extra:?}: {err}");
+    }
     // Bad settings.
     assert!(base.with_refinement(9, &[8], 0).is_err());
     assert!(base.with_refinement(1, &[0], 0).is_err());

@@ -521,14 +521,8 @@ impl Default for RefineTrainConfig {
     fn default() -> Self {
         RefineTrainConfig {
             epochs: 4,
-            batch: 2048,
-            sgd: SgdConfig {
-                lr: 0.05,
-                momentum: 0.9,
-                weight_decay: 1e-5,
-                clip: Some(100.0),
-                nesterov: false,
-            },
+            batch: 4096,
+            sgd: SgdConfig { lr: 0.1, momentum: 0.9, weight_decay: 1e-5, clip: Some(100.0), nesterov: false },
             seed: 0,
         }
     }

@@ -83,8 +83,8 @@ pub fn run(argv: &[String]) -> Result<()> {
     let widths = parse_widths(a.value("--widths").unwrap_or("32,32"))?;
     let mut cfg = RefineTrainConfig::default();
     cfg.epochs = a.parsed_in(cmd, "--epochs", cfg.epochs, 1, 1000, "passes per round")?;
-    cfg.batch = a.parsed_in(cmd, "--batch", 4096usize, 1, 1_000_000, "candidates per step")?;
-    cfg.sgd.lr = a.parsed(cmd, "--lr", 0.1f32)?;
+    cfg.batch = a.parsed_in(cmd, "--batch", cfg.batch, 1, 1_000_000, "candidates per step")?;
+    cfg.sgd.lr = a.parsed(cmd, "--lr", cfg.sgd.lr)?;
     if !(cfg.sgd.lr.is_finite() && cfg.sgd.lr > 0.0) {
         return Err(Error::Usage(format!("refine: --lr must be a finite number > 0, got {}", cfg.sgd.lr)));
     }

@@ -251,3 +251,20 @@ fn file_errors_name_the_path() {
     assert!(e.contains("x.stl") && e.contains(".obj .off .ply"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A leading UTF-8 byte-order mark (Windows editors write one) is skipped by every text
+/// format: the points and faces read are those of the same file without it.
+#[test]
+fn a_leading_byte_order_mark_is_ignored() {
+    let bom = |b: &[u8]| [&b"\xEF\xBB\xBF"[..], b].concat();
+    let xyz = b"# cloud\n0 0 0\n1 0 0.5\n0 1 2\n".to_vec();
+    let want = parse_points(&xyz, PointFormat::Xyz, "a").unwrap();
+    assert_eq!(parse_points(&bom(&xyz), PointFormat::Xyz, "a").unwrap(), want);
+    let obj = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n".to_vec();
+    let off = b"OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n".to_vec();
+    for (bytes, format) in [(obj, MeshFormat::Obj), (off, MeshFormat::Off)] {
+        let want = parse_mesh(&bytes, format, "a").unwrap();
+        let got = parse_mesh(&bom(&bytes), format, "a").unwrap();
+        assert_eq!((got.vertices, got.faces), (want.vertices, want.faces), "{format:?}");
+    }
+}

@@ -6,7 +6,8 @@ use crate::error::Error;
 use std::io::Write;
 
 /// Iterates over the lines of a buffer as `(1-based line number, bytes)`, without
-/// the `\n` and without a trailing `\r` (so CRLF files read like LF files).
+/// the `\n` and without a trailing `\r` (so CRLF files read like LF files), and
+/// without a leading UTF-8 byte-order mark (Windows editors write one).
 pub(crate) struct Lines<'a> {
     rest: &'a [u8],
     line: usize,
@@ -15,6 +16,7 @@ pub(crate) struct Lines<'a> {
 
 impl<'a> Lines<'a> {
     pub(crate) fn new(bytes: &'a [u8]) -> Self {
+        let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
         Lines { rest: bytes, line: 0, done: bytes.is_empty() }
     }
 }
@@ -250,6 +252,17 @@ mod tests {
         assert_eq!(v, vec![(1, &b"a"[..]), (2, &b"b"[..]), (3, &b""[..]), (4, &b"c"[..])]);
         assert_eq!(Lines::new(b"a\n").count(), 1);
         assert_eq!(Lines::new(b"").count(), 0);
+    }
+
+    #[test]
+    fn a_leading_byte_order_mark_is_skipped() {
+        let v: Vec<_> = Lines::new(b"\xEF\xBB\xBF1 2 3\n4 5 6").collect();
+        assert_eq!(v, vec![(1, &b"1 2 3"[..]), (2, &b"4 5 6"[..])]);
+        // Only at the start, and only the whole mark.
+        let v: Vec<_> = Lines::new(b"1\n\xEF\xBB\xBF2").collect();
+        assert_eq!(v[1].1, b"\xEF\xBB\xBF2");
+        assert_eq!(Lines::new(b"\xEF\xBB\xBF").count(), 0);
+        assert_eq!(Lines::new(b"\xEF\xBB1").next().unwrap().1, b"\xEF\xBB1");
     }
 
     #[test]

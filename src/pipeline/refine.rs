@@ -558,15 +558,11 @@ pub fn score_stats(probs: &[f32], labels: &[u8]) -> ScoreStats {
             ap += hits as f64 / (rank + 1) as f64;
         }
     }
-    let div = |a: usize, b: usize| if b == 0 { 0.0 } else { a as f64 / b as f64 };
-    ScoreStats { precision: div(tp, sel), recall: div(tp, pos), average_precision: div_f(ap, pos) }
-}
-
-fn div_f(a: f64, b: usize) -> f64 {
-    if b == 0 {
-        0.0
-    } else {
-        a / b as f64
+    let div = |a: f64, b: usize| if b == 0 { 0.0 } else { a / b as f64 };
+    ScoreStats {
+        precision: div(tp as f64, sel),
+        recall: div(tp as f64, pos),
+        average_precision: div(ap, pos),
     }
 }
 

@@ -59,7 +59,7 @@ pub struct ModelConfig {
     /// Batch-norm momentum (PyTorch convention).
     pub bn_momentum: f32,
     /// Refinement rounds after the classifier ([`crate::pipeline::refine`]; 0: none).
-    /// Presets have none: `point2quad train-refine` adds them to a trained model.
+    /// Presets have none: `point2quad refine` adds them to a trained model.
     pub refine_rounds: usize,
     /// Hidden widths of each refinement round's MLP.
     pub refine_widths: Vec<usize>,
@@ -824,13 +824,13 @@ impl Network {
 
 /// Softmax probability of class 1 for rows of 2 logits.
 pub fn probabilities(logits: &[f32]) -> Vec<f32> {
-    logits
-        .chunks_exact(2)
-        .map(|l| {
-            let d = (l[0] - l[1]) as f64;
-            (1.0 / (1.0 + d.exp())) as f32
-        })
-        .collect()
+    logits.chunks_exact(2).map(|l| face_probability(l[0], l[1])).collect()
+}
+
+/// The softmax probability of class 1 ("face is real") from the logit pair (l0, l1).
+pub fn face_probability(l0: f32, l1: f32) -> f32 {
+    let d = (l0 - l1) as f64;
+    (1.0 / (1.0 + d.exp())) as f32
 }
 
 #[cfg(test)]

@@ -1,5 +1,5 @@
 //! Refinement of the classifier's probabilities by the candidates' neighbourhood (our
-//! addition to the paper; README "Refinement").
+//! addition to the paper; README, "Session 5: refinement rounds").
 //!
 //! The classifier scores every candidate on its own. Whether a candidate is a face
 //! depends on its rivals too: in a manifold, consistently oriented quad mesh a directed
@@ -43,18 +43,14 @@ fn logit(p: f32) -> f32 {
 pub struct CandidateGraph {
     quads: Vec<[u32; 4]>,
     n_points: usize,
-    /// Directed edges: members (candidate ids) grouped by edge, and group starts.
-    dir_members: Vec<u32>,
-    dir_start: Vec<u32>,
-    /// Per candidate edge `4·c + i`: the group of (q_i → q_{i+1}), and of the reversed
-    /// edge (`NONE` when no candidate has it).
-    dir_group: Vec<u32>,
+    /// Directed edges; slot `4·c + i` is edge (q_i → q_{i+1}) of candidate c.
+    dir: Groups,
+    /// Per slot `4·c + i`: the group of the reversed edge (`NONE` when no candidate
+    /// has it).
     rev_group: Vec<u32>,
-    /// Unordered pairs: members grouped by pair, group starts; per `6·c + j` the group
-    /// of pair j (edges 0–3, then the diagonals (q0, q2), (q1, q3)).
-    pair_members: Vec<u32>,
-    pair_start: Vec<u32>,
-    pair_group: Vec<u32>,
+    /// Unordered pairs; slot `6·c + j` is pair j of candidate c (edges 0–3, then the
+    /// diagonals (q0, q2), (q1, q3)).
+    pairs: Groups,
 }
 
 /// "No group" (a reversed edge no candidate has).
@@ -63,6 +59,7 @@ const NONE: u32 = u32::MAX;
 /// Entries `(a, b, slot)` grouped by the pair (a, b): by a counting sort on `a`
 /// (points index below `n`), then a sort on (b, slot) within each point's bucket, so
 /// members of a group are in slot order.
+#[derive(Clone, Debug)]
 struct Groups {
     /// Member candidates (`slot / per`), group after group.
     members: Vec<u32>,
@@ -195,29 +192,7 @@ impl CandidateGraph {
         let (dir, pairs) =
             crate::par::join(|| Groups::new(n_points, &dir, 4), || Groups::new(n_points, &pairs, 6));
         let rev_group = quads.iter().flat_map(|q| (0..4).map(|i| dir.find(q[(i + 1) % 4], q[i]))).collect();
-        let (dir_members, dir_start, dir_group) = (dir.members, dir.start, dir.of_slot);
-        let (pair_members, pair_start, pair_group) = (pairs.members, pairs.start, pairs.of_slot);
-        Ok(CandidateGraph {
-            quads: quads.to_vec(),
-            n_points,
-            dir_members,
-            dir_start,
-            dir_group,
-            rev_group,
-            pair_members,
-            pair_start,
-            pair_group,
-        })
-    }
-
-    /// Number of candidates.
-    pub fn len(&self) -> usize {
-        self.quads.len()
-    }
-
-    /// True when there is no candidate.
-    pub fn is_empty(&self) -> bool {
-        self.quads.is_empty()
+        Ok(CandidateGraph { quads: quads.to_vec(), n_points, dir, rev_group, pairs })
     }
 
     /// The refinement input of every candidate ([`refine_features`] documents the
@@ -240,8 +215,8 @@ impl CandidateGraph {
                 return Err(Error::invalid(format!("refine features: candidate {c} has {what} {}", v[c])));
             }
         }
-        let dir = group_best(&self.dir_members, &self.dir_start, probs);
-        let pair = group_best(&self.pair_members, &self.pair_start, probs);
+        let dir = group_best(&self.dir.members, &self.dir.start, probs);
+        let pair = group_best(&self.pairs.members, &self.pairs.start, probs);
         let mut mass = vec![0.0f64; self.n_points];
         let mut high = vec![0u32; self.n_points];
         for (q, &p) in self.quads.iter().zip(probs) {
@@ -259,17 +234,17 @@ impl CandidateGraph {
                 let (mut rival, mut across, mut shared) = ([0.0f32; 4], [0.0f32; 4], [0.0f32; 4]);
                 let (mut at, mut hi) = ([0.0f32; 4], [0.0f32; 4]);
                 for i in 0..4 {
-                    rival[i] = best_other(&dir, self.dir_group[4 * c + i], me);
+                    rival[i] = best_other(&dir, self.dir.of_slot[4 * c + i], me);
                     across[i] = best_other(&dir, self.rev_group[4 * c + i], me);
-                    shared[i] = best_other(&pair, self.pair_group[6 * c + i], me);
+                    shared[i] = best_other(&pair, self.pairs.of_slot[6 * c + i], me);
                     let a = q[i] as usize;
                     at[i] = (mass[a] - p as f64) as f32;
                     hi[i] = (high[a] - (p > 0.5) as u32) as f32 / 4.0;
                 }
                 let diff = [0, 1, 2, 3].map(|i| across[i] - rival[i]);
-                let diag = best_other(&pair, self.pair_group[6 * c + 4], me).max(best_other(
+                let diag = best_other(&pair, self.pairs.of_slot[6 * c + 4], me).max(best_other(
                     &pair,
-                    self.pair_group[6 * c + 5],
+                    self.pairs.of_slot[6 * c + 5],
                     me,
                 ));
                 row[0] = logit(p);
@@ -412,10 +387,17 @@ impl Refiner {
         Ok(h)
     }
 
-    /// Round `r`'s probabilities from raw feature rows (inference): the MLP row by row
-    /// (equal to [`Refiner::forward`] on standardised rows up to float rounding; a
-    /// `[M × 27]` GEMM through the tape is slower than these dot products).
-    fn round_probs(&self, params: &ParamStore, r: usize, feats: Vec<f32>) -> Result<Vec<f32>> {
+    /// Round `r`'s probabilities from feature rows (inference; `standardised`: the rows
+    /// went through [`Refiner::standardise`] already): the MLP row by row (equal to
+    /// [`Refiner::forward`] on standardised rows up to float rounding; a `[M × 27]`
+    /// GEMM through the tape is slower than these dot products).
+    fn round_probs(
+        &self,
+        params: &ParamStore,
+        r: usize,
+        feats: &[f32],
+        standardised: bool,
+    ) -> Result<Vec<f32>> {
         let round = &self.rounds[r];
         let mean = params.get(round.mean).data();
         let scale = params.get(round.scale).data();
@@ -435,7 +417,7 @@ impl Refiner {
             for (i, o) in chunk.iter_mut().enumerate() {
                 let row = &feats[(ch * ROWS + i) * REFINE_DIM..][..REFINE_DIM];
                 for j in 0..REFINE_DIM {
-                    x[j] = (row[j] - mean[j]) * scale[j];
+                    x[j] = if standardised { row[j] } else { (row[j] - mean[j]) * scale[j] };
                 }
                 for (l, &(w, b, cin, cout)) in layers.iter().enumerate() {
                     for (k, yk) in y[..cout].iter_mut().enumerate() {
@@ -444,36 +426,14 @@ impl Refiner {
                     }
                     std::mem::swap(&mut x, &mut y);
                 }
-                let d = (x[0] - x[1]) as f64;
-                *o = (1.0 / (1.0 + d.exp())) as f32;
+                *o = crate::pipeline::model::face_probability(x[0], x[1]);
             }
         });
         Ok(out)
     }
 
-    /// Runs rounds `0..upto` from the classifier's probabilities `base`; returns the
-    /// last round's probabilities (`base` itself when `upto` is 0).
-    ///
-    /// # Errors
-    /// As [`refine_features`].
-    pub fn apply_upto(
-        &self,
-        params: &ParamStore,
-        quads: &[[u32; 4]],
-        base: &[f32],
-        n_points: usize,
-        upto: usize,
-    ) -> Result<Vec<f32>> {
-        let graph = CandidateGraph::new(quads, n_points)?;
-        let mut p = base.to_vec();
-        for r in 0..upto.min(self.rounds.len()) {
-            let f = graph.features(&p, base)?;
-            p = self.round_probs(params, r, f)?;
-        }
-        Ok(p)
-    }
-
-    /// Runs every round ([`Refiner::apply_upto`] with all rounds).
+    /// Runs every round from the classifier's probabilities `base`; returns the last
+    /// round's probabilities (`base` itself without rounds).
     ///
     /// # Errors
     /// As [`refine_features`].
@@ -484,7 +444,13 @@ impl Refiner {
         base: &[f32],
         n_points: usize,
     ) -> Result<Vec<f32>> {
-        self.apply_upto(params, quads, base, n_points, self.rounds.len())
+        let graph = CandidateGraph::new(quads, n_points)?;
+        let mut p = base.to_vec();
+        for r in 0..self.rounds.len() {
+            let f = graph.features(&p, base)?;
+            p = self.round_probs(params, r, &f, false)?;
+        }
+        Ok(p)
     }
 }
 
@@ -720,11 +686,15 @@ pub fn train_refiner(
             progress(RefineProgress::Epoch { round: r + 1, epoch: epoch + 1, loss: last_loss });
         }
         let before = score_stats(&cur_val.concat(), &val_labels);
-        let next = |feats: Vec<Vec<f32>>| -> Result<Vec<Vec<f32>>> {
-            feats.into_iter().map(|f| refiner.round_probs(params, r, f)).collect()
-        };
-        cur_train = next(all_features(&train_graphs, train, &cur_train)?)?;
-        cur_val = next(all_features(&val_graphs, val, &cur_val)?)?;
+        // The round's output on the training rows already built (and standardised).
+        let mut all = refiner.round_probs(params, r, &x, true)?.into_iter();
+        for (cur, s) in cur_train.iter_mut().zip(train) {
+            *cur = all.by_ref().take(s.quads.len()).collect();
+        }
+        cur_val = all_features(&val_graphs, val, &cur_val)?
+            .iter()
+            .map(|f| refiner.round_probs(params, r, f, false))
+            .collect::<Result<_>>()?;
         let report = RoundReport {
             round: r + 1,
             loss: last_loss,
@@ -762,7 +732,7 @@ mod tests {
             crate::pipeline::model::probabilities(g.value(logits).data())
         };
         let want = tape(&params);
-        let got = refiner.round_probs(&params, 1, feats.clone()).unwrap();
+        let got = refiner.round_probs(&params, 1, &feats, false).unwrap();
         let worst = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
         assert!(worst < 1e-5, "worst difference {worst}");
         // A changed weight changes the answer well beyond that.
@@ -770,7 +740,7 @@ mod tests {
         let mut t = params.get(w).clone();
         t.data_mut()[3] += 0.5;
         params.set(w, t).unwrap();
-        let moved = refiner.round_probs(&params, 1, feats).unwrap();
+        let moved = refiner.round_probs(&params, 1, &feats, false).unwrap();
         let diff = moved.iter().zip(&got).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
         assert!(diff > 1e-3, "the check could not fail: {diff}");
     }

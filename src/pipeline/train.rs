@@ -166,7 +166,10 @@ pub fn auto_pos_weight(samples: &[Sample]) -> f32 {
 
 /// Checks that every sample fits `model`: enough features per candidate, and, with a
 /// point encoder, corner indices within the sample's points.
-fn check_samples(samples: &[Sample], model: &Model) -> Result<()> {
+///
+/// # Errors
+/// `InvalidInput` naming the first sample that does not fit.
+pub fn check_samples(samples: &[Sample], model: &Model) -> Result<()> {
     let fin = model.config().face_in();
     for s in samples {
         if (s.feature_dim as usize) < fin {

@@ -2,12 +2,12 @@
 //! the classifier's own probabilities over a dataset (the classifier stays frozen).
 
 use crate::args::{Args, Spec};
-use crate::cmd_train::{fnv, load_dir};
+use crate::cmd_train::{is_validation, load_dir};
 use crate::output::say;
 use point2quad::nn::checkpoint;
 use point2quad::pipeline::model::{Model, MAX_REFINE_ROUNDS};
 use point2quad::pipeline::refine::{train_refiner, RefineProgress, RefineSample, RefineTrainConfig};
-use point2quad::pipeline::train::sample_input;
+use point2quad::pipeline::train::{check_samples, sample_input};
 use point2quad::{Error, Result};
 use std::path::{Path, PathBuf};
 
@@ -99,34 +99,30 @@ pub fn run(argv: &[String]) -> Result<()> {
 
     let t0 = std::time::Instant::now();
     let samples = load_dir(&data)?;
+    check_samples(&samples, &base)?;
     let fin = base.config().face_in();
+    let n_samples = samples.len();
     let (mut tr, mut va) = (Vec::new(), Vec::new());
-    for (i, s) in samples.iter().enumerate() {
-        if !s.candidates.is_empty() && (s.feature_dim as usize) < fin {
-            return Err(Error::invalid(format!(
-                "sample {}: {} features per candidate, the model reads {fin}",
-                s.name, s.feature_dim
-            )));
-        }
-        let x = sample_input(s, fin);
+    for (i, s) in samples.into_iter().enumerate() {
+        let x = sample_input(&s, fin);
         let p = base
             .predict_base(&s.points, &s.candidates, &x)
             .map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))?;
+        let validation = is_validation(&s.name, val_fraction);
         let rs = RefineSample {
-            name: s.name.clone(),
             n_points: s.points.len(),
-            quads: s.candidates.clone(),
-            labels: s.labels.clone(),
+            name: s.name,
+            quads: s.candidates,
+            labels: s.labels,
             base: p,
         };
-        if (fnv(&s.name) % 10_000) as f64 / 10_000.0 < val_fraction {
+        if validation {
             va.push(rs);
         } else {
             tr.push(rs);
         }
-        crate::output::stderr(&format!("\rrefine: scored {}/{} samples   ", i + 1, samples.len()));
+        crate::output::stderr(&format!("\rrefine: scored {}/{n_samples} samples   ", i + 1));
     }
-    drop(samples);
     let cands: usize = tr.iter().map(|s| s.quads.len()).sum();
     say!(
         "\rrefine: {} training / {} validation samples ({cands} training candidates) scored in {:.1}s; {rounds} round(s) of widths {widths:?}",

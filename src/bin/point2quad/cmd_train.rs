@@ -71,9 +71,14 @@ const SPEC: Spec = Spec {
     switches: &["--no-rotate", "--no-augment"],
 };
 
-/// FNV-1a 64 of a sample name: the validation split is `fnv(name) % 10000 / 10000 < F`.
-pub(crate) fn fnv(s: &str) -> u64 {
+fn fnv(s: &str) -> u64 {
     s.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
+}
+
+/// Whether the sample called `name` is in the validation part: by a hash of the name,
+/// so every run (and `refine`) splits a dataset the same way.
+pub(crate) fn is_validation(name: &str, fraction: f64) -> bool {
+    (fnv(name) % 10_000) as f64 / 10_000.0 < fraction
 }
 
 /// Every `.p2qs` sample of `dir`, by file name.
@@ -187,7 +192,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let samples = load_dir(&data)?;
     let (mut tr, mut va): (Vec<Sample>, Vec<Sample>) = (Vec::new(), Vec::new());
     for s in samples {
-        if (fnv(&s.name) % 10_000) as f64 / 10_000.0 < val_fraction {
+        if is_validation(&s.name, val_fraction) {
             va.push(s);
         } else {
             tr.push(s);

@@ -94,6 +94,18 @@ impl HoleFillReport {
     pub fn quads_added(&self) -> usize {
         self.quads_by_pattern.iter().sum()
     }
+
+    /// Adds the counts of a later run over the same mesh (loops are counted per run).
+    pub fn absorb(&mut self, later: &HoleFillReport) {
+        self.loops_before += later.loops_before;
+        self.loops_eligible += later.loops_eligible;
+        self.loops_closed += later.loops_closed;
+        for (a, b) in self.quads_by_pattern.iter_mut().zip(later.quads_by_pattern) {
+            *a += b;
+        }
+        self.vertices_reused += later.vertices_reused;
+        self.vertices_added += later.vertices_added;
+    }
 }
 
 /// Isolated vertices in a uniform grid, for pattern 3's reuse of unused input points.
@@ -137,12 +149,12 @@ impl IsolatedGrid {
 }
 
 /// Unit normal of a quad: normalize((p2 − p0) × (p3 − p1)).
-fn quad_normal(p: &[[f64; 3]; 4]) -> Option<[f64; 3]> {
+pub(crate) fn quad_normal(p: &[[f64; 3]; 4]) -> Option<[f64; 3]> {
     normalize(cross(sub(p[2], p[0]), sub(p[3], p[1])))
 }
 
 /// Scaled Jacobian (DESIGN §2): min over corners of (c_i · n)/(|e_{i−1}||e_i|).
-fn scaled_jacobian(p: &[[f64; 3]; 4]) -> f64 {
+pub(crate) fn scaled_jacobian(p: &[[f64; 3]; 4]) -> f64 {
     let Some(n) = quad_normal(p) else { return -1.0 };
     let mut sj = f64::INFINITY;
     for i in 0..4 {

@@ -6,10 +6,12 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
+use super::close::{close_holes, CloseConfig, CloseReport};
 use super::halfedge::{HalfedgeMesh, InsertOutcome};
 use super::hole_fill::{fill_holes, HoleFillConfig, HoleFillReport};
 use super::poly::QuadMesh;
 use super::quality::is_degenerate_quad;
+use super::rescue::{remove_small_open_components, rescue_faces, RescueConfig};
 use super::soup::FaceSoup;
 use crate::error::{Error, Result};
 use crate::math::{cross, dot};
@@ -34,8 +36,16 @@ pub struct PostprocessConfig {
     /// 0.9602 / 0.9627 at 0, 0.9625 / 0.9650 at 1, 0.9629 / 0.9650 at 2, 0.9630 / 0.9651
     /// at 8.
     pub support_weight: f32,
+    /// After step (b), open components of at most this many faces are removed (floaters;
+    /// [`remove_small_open_components`]). 0 keeps them.
+    pub max_floater_faces: usize,
+    /// After that, candidates at holes are rescued from the refused faces and the reserve
+    /// ([`rescue_faces`]).
+    pub rescue: RescueConfig,
     /// Whether step (c) runs.
     pub fill_holes: bool,
+    /// Odd-loop pairing and quadrangulation of the loops left open ([`close_holes`]).
+    pub close: CloseConfig,
     /// Hole-filling thresholds.
     pub hole_fill: HoleFillConfig,
 }
@@ -46,7 +56,10 @@ impl Default for PostprocessConfig {
             score_limit: 10,
             score_filter: true,
             support_weight: 2.0,
+            max_floater_faces: 4,
+            rescue: RescueConfig::default(),
             fill_holes: true,
+            close: CloseConfig::default(),
             hole_fill: HoleFillConfig::default(),
         }
     }
@@ -70,8 +83,14 @@ pub struct PostprocessReport {
     pub inserted: usize,
     /// Faces refused on insertion because they would break manifoldness (b).
     pub refused_on_insertion: usize,
+    /// Faces of small open components removed after insertion.
+    pub floater_faces_removed: usize,
+    /// Candidates rescued at holes (from refused faces or the reserve).
+    pub rescued: usize,
     /// The hole filling's account (c); zero when it did not run.
     pub hole_fill: HoleFillReport,
+    /// The closing of loops left open.
+    pub close: CloseReport,
     /// Components whose orientation was reversed at the end (see [`orient_components`]).
     pub components_flipped: usize,
     /// Faces in the output.
@@ -299,24 +318,46 @@ pub fn orient_components(
 
 /// The whole post-process, after dropping faces that repeat a vertex or have no area
 /// ([`PostprocessReport::degenerate`], [`PostprocessReport::zero_area`]): (a) score filter,
-/// (b) manifold insertion by probability, (c) hole filling, then [`orient_components`].
-/// The output's vertices are `positions` (bit-identical, in order) followed by any vertex
-/// the hole filling added; vertices no face uses stay in place.
+/// (b) manifold insertion by probability, removal of floaters and rescue of refused faces
+/// at holes, (c) hole filling, then [`orient_components`]. Same as
+/// [`postprocess_with_reserve`] with an empty reserve.
 ///
 /// # Errors
-/// `InvalidInput` when `probs` and `faces` differ in length, a face index is out of range,
-/// a probability is not finite, or a position is not finite.
+/// As [`postprocess_with_reserve`].
 pub fn postprocess(
     positions: &[[f64; 3]],
     faces: &[[u32; 4]],
     probs: &[f32],
     cfg: &PostprocessConfig,
 ) -> Result<(QuadMesh, PostprocessReport)> {
+    postprocess_with_reserve(positions, faces, probs, &[], &[], cfg)
+}
+
+/// The post-process of `faces` (the predicted ones, with their probabilities), where
+/// `reserve` holds candidates predicted not to be faces (with theirs): they never enter
+/// by step (b), but the rescue after it may use them at holes, as it may use predicted
+/// faces that step (b) refused. The output's vertices are `positions` (bit-identical, in
+/// order) followed by any vertex the hole filling added; vertices no face uses stay in
+/// place.
+///
+/// # Errors
+/// `InvalidInput` when probabilities and faces differ in length, a face index is out of
+/// range, a probability is not finite, or a position is not finite.
+pub fn postprocess_with_reserve(
+    positions: &[[f64; 3]],
+    faces: &[[u32; 4]],
+    probs: &[f32],
+    reserve: &[[u32; 4]],
+    reserve_probs: &[f32],
+    cfg: &PostprocessConfig,
+) -> Result<(QuadMesh, PostprocessReport)> {
     check_inputs(positions.len(), faces, probs)?;
+    check_inputs(positions.len(), reserve, reserve_probs)?;
     if let Some(i) = positions.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
         return Err(Error::invalid(format!("postprocess: vertex {i} has a non-finite coordinate")));
     }
     let mut report = PostprocessReport { faces_in: faces.len(), ..Default::default() };
+    let usable = |f: &[u32; 4]| !is_degenerate(f) && !is_degenerate_quad(&f.map(|v| positions[v as usize]));
     let mut keep: Vec<bool> = faces.iter().map(|f| !is_degenerate(f)).collect();
     report.degenerate = keep.iter().filter(|k| !**k).count();
     for (k, f) in keep.iter_mut().zip(faces) {
@@ -325,6 +366,7 @@ pub fn postprocess(
             report.zero_area += 1;
         }
     }
+    let usable_before_filter = keep.clone();
     if cfg.score_filter {
         report.removed_by_score = score_filter(faces, probs, &mut keep, cfg.score_limit);
     }
@@ -336,10 +378,41 @@ pub fn postprocess(
     let (mut mesh, out) = insert_by_priority(positions.len(), faces, &order);
     report.inserted = mesh.n_faces();
     report.refused_on_insertion = out.refused.len();
+    report.floater_faces_removed = remove_small_open_components(&mut mesh, cfg.max_floater_faces);
     let mut pos = positions.to_vec();
     if cfg.fill_holes {
         report.hole_fill = fill_holes(&mut mesh, &mut pos, &cfg.hole_fill)?;
     }
+    if cfg.rescue.enabled {
+        // One list: the predicted faces not in the mesh (refused, deleted by the score
+        // filter, or floaters), then the reserve.
+        let mut all: Vec<[u32; 4]> = Vec::with_capacity(faces.len() + reserve.len());
+        let mut all_p: Vec<f32> = Vec::with_capacity(faces.len() + reserve.len());
+        let mut pool = Vec::new();
+        for (i, f) in faces.iter().enumerate() {
+            if usable_before_filter[i] && out.inserted[i].map_or(true, |h| !mesh.is_face_alive(h)) {
+                pool.push(all.len());
+                all.push(*f);
+                all_p.push(probs[i]);
+            }
+        }
+        for (f, &p) in reserve.iter().zip(reserve_probs) {
+            if usable(f) {
+                pool.push(all.len());
+                all.push(*f);
+                all_p.push(p);
+            }
+        }
+        report.rescued = rescue_faces(&mut mesh, &all, &all_p, &pool, &cfg.rescue).len();
+    }
+    report.close = close_holes(&mut mesh, &pos, &cfg.close);
+    if cfg.fill_holes && (report.rescued > 0 || report.close.quads_added > 0) {
+        // The rescue and the closing changed the loops: the patterns may now apply.
+        let again = fill_holes(&mut mesh, &mut pos, &cfg.hole_fill)?;
+        report.hole_fill.absorb(&again);
+    }
+    // Rescued faces and removals can leave new floaters.
+    report.floater_faces_removed += remove_small_open_components(&mut mesh, cfg.max_floater_faces);
     report.components_flipped = orient_components(&mut mesh, &pos, faces, &out);
     report.faces_out = mesh.n_faces();
     report.boundary_loops_out = mesh.boundary_loops().len();

@@ -8,7 +8,7 @@
 //! points are one point to the pipeline: faces use the first occurrence.
 
 use crate::mesh::poly::QuadMesh;
-use crate::mesh::postprocess::{postprocess, PostprocessConfig, PostprocessReport};
+use crate::mesh::postprocess::{postprocess_with_reserve, PostprocessConfig, PostprocessReport};
 use crate::pipeline::candidates::{generate, CandidateConfig};
 use crate::pipeline::features::face_input;
 use crate::pipeline::frame::Frame;
@@ -128,10 +128,16 @@ pub fn reconstruct_with_report(
     };
     let mut faces = Vec::new();
     let mut face_probs = Vec::new();
+    // The rest of the candidates: the post-process may rescue them at holes.
+    let mut reserve = Vec::new();
+    let mut reserve_probs = Vec::new();
     for (q, &p) in cands.quads.iter().zip(&probs) {
         if p > cfg.threshold {
             faces.push(*q);
             face_probs.push(p);
+        } else {
+            reserve.push(*q);
+            reserve_probs.push(p);
         }
     }
     report.predicted = faces.len();
@@ -145,7 +151,14 @@ pub fn reconstruct_with_report(
         // 1e-200. Its thresholds are angles and ratios, so only the vertices the hole
         // filling adds need mapping back; the input's own are written back as given.
         let local64: Vec<[f64; 3]> = uniq.iter().map(|&p| frame.to_local_f64(p)).collect();
-        let (mesh, pp) = postprocess(&local64, &faces, &face_probs, &cfg.postprocess)?;
+        let (mesh, pp) = postprocess_with_reserve(
+            &local64,
+            &faces,
+            &face_probs,
+            &reserve,
+            &reserve_probs,
+            &cfg.postprocess,
+        )?;
         report.vertices_added = mesh.vertices.len() - u;
         report.postprocess = Some(pp);
         let mut vertices = points.to_vec();

@@ -30,11 +30,28 @@ OPTIONS:
                           (may be non-manifold: the paper's raw output)
     --threshold T         probability above which a candidate is kept [0.5]
     --k K                 neighbours searched per point for candidates, 3 to 64 [20]
+    --max-floater-faces N remove open components of at most N faces after insertion
+                          (floaters; 0 keeps them) [4]
+    --rescue-min-prob P   at holes, candidates scored under the threshold but at least P
+                          are inserted where they glue to the border on 2+ edges [0.1]
+    --no-rescue           do not rescue candidates at holes
+    --no-close            leave odd loops and loops the hole filling could not close
+                          open (default: pair odd loops through the faces between
+                          them, quadrangulate loops of at most 40 edges)
 ";
 
 const SPEC: Spec = Spec {
-    valued: &["-o", "--output", "--model", "--svg", "--threshold", "--k"],
-    switches: &["--no-postprocess"],
+    valued: &[
+        "-o",
+        "--output",
+        "--model",
+        "--svg",
+        "--threshold",
+        "--k",
+        "--max-floater-faces",
+        "--rescue-min-prob",
+    ],
+    switches: &["--no-postprocess", "--no-rescue", "--no-close"],
 };
 
 /// The weights shipped with the project (`make train` writes them), embedded in the
@@ -63,6 +80,12 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     cfg.candidates.k =
         a.parsed_in(cmd, "--k", cfg.candidates.k, 3, MAX_K, "work grows with the cube of k")?;
+    let pp = &mut cfg.postprocess;
+    pp.max_floater_faces = a.parsed(cmd, "--max-floater-faces", pp.max_floater_faces)?;
+    pp.rescue.min_prob =
+        a.parsed_in(cmd, "--rescue-min-prob", pp.rescue.min_prob, 0.0, 1.0, "it is a probability")?;
+    pp.rescue.enabled = !a.switch("--no-rescue");
+    pp.close.enabled = !a.switch("--no-close");
     // Check the output names before the work, not after it.
     point2quad::io::mesh_io::MeshFormat::from_path(&out)?;
     let svg = a.value("--svg").map(Path::new);

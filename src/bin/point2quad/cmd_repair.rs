@@ -22,8 +22,10 @@ corners at one position, all four at one point, or all on one line; within 1e-12
 quad's size) are dropped and counted. Steps: (a) the paper's filter deletes the worst-scoring face while any face scores above
 the limit (score (boundary edges + 1)(10 non-manifold edges + 1)); (b) the survivors are
 inserted by priority, refusing any face that would break manifoldness (opposite-oriented
-patches are flipped to agree); (c) greedy hole filling. Closed components are then turned
-outward. Output vertices are the input's, in order and unchanged, plus any the hole
+patches are flipped to agree); (c) greedy hole filling, then what is left: two loops with
+an odd number of edges (which quads cannot close) are merged by removing the face or two
+between them, and loops of at most 40 edges are split into quads over their own vertices.
+Closed components are then turned outward. Output vertices are the input's, in order and unchanged, plus any the hole
 filling adds.
 
 OPTIONS:
@@ -36,6 +38,7 @@ OPTIONS:
                            more boundary edges and so erodes open borders and clustered holes)
     --no-filter            skip step (a)
     --no-fill              skip step (c)
+    --no-close             skip the odd-loop pairing and quadrangulation of step (c)
     --max-hole-edges N     leave boundary loops longer than N open (default 40)
     -h, --help             this help
 ";
@@ -43,7 +46,7 @@ OPTIONS:
 pub fn run(argv: &[String]) -> Result<()> {
     let spec = Spec {
         valued: &["-o", "--priority", "--score-limit", "--max-hole-edges"],
-        switches: &["--drop-non-quads", "--no-filter", "--no-fill"],
+        switches: &["--drop-non-quads", "--no-filter", "--no-fill", "--no-close"],
     };
     let a = Args::parse("repair", argv, &spec)?;
     let input = &a.expect_positional("repair", 1, "one input mesh")?[0];
@@ -54,8 +57,11 @@ pub fn run(argv: &[String]) -> Result<()> {
         score_limit: a.parsed("repair", "--score-limit", PostprocessConfig::default().score_limit)?,
         score_filter: !a.switch("--no-filter"),
         fill_holes: !a.switch("--no-fill"),
+        // A user's mesh keeps its small parts (reconstruct drops floaters of 4 faces).
+        max_floater_faces: 0,
         ..Default::default()
     };
+    cfg.close.enabled = !a.switch("--no-fill") && !a.switch("--no-close");
     cfg.hole_fill.max_hole_edges = a.parsed("repair", "--max-hole-edges", cfg.hole_fill.max_hole_edges)?;
     let uniform = match a.value("--priority").unwrap_or("order") {
         "order" => false,

@@ -1,0 +1,424 @@
+//! Closing what the greedy hole filling leaves (not in the paper; README "Deviations"):
+//! - **Odd loops in pairs.** A loop with an odd number of edges cannot be closed by
+//!   quads: every quad patch has an even number of border edges. Odd loops come in pairs
+//!   (a quad mesh has an even number of border edges in all), and the common case is a
+//!   wrong quad over the diagonal of two true ones, which leaves a triangle on each side.
+//!   A face with an edge on two different odd loops is removed, which merges them into one
+//!   even loop; that loop is then quadrangulated. If it cannot be, the face is put back.
+//! - **Even loops by quadrangulation.** An even loop of at most `max_loop_edges` edges is
+//!   split into quads over its own vertices (no new vertex) by dynamic programming over
+//!   its chords, minimising Σ(1 − scaled Jacobian) under the hole filling's shape and fold
+//!   bounds; chords that are already edges of the mesh are not used.
+
+use super::halfedge::HalfedgeMesh;
+use super::handles::{FaceId, HalfedgeId, VertexId};
+use super::hole_fill::{quad_normal, scaled_jacobian};
+use super::quality::is_degenerate_quad;
+use crate::math::{add, cross, dot, norm, normalize, scale, sub};
+
+/// Settings of [`close_holes`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct CloseConfig {
+    /// Whether it runs.
+    pub enabled: bool,
+    /// Longer loops are left open (borders of open surfaces; the dynamic programme costs
+    /// O(n⁴) in the loop length).
+    pub max_loop_edges: usize,
+    /// Minimum scaled Jacobian of each quad of a quadrangulation (0: no corner reflex).
+    pub min_scaled_jacobian: f64,
+    /// Minimum dot product of a quad's unit normal with the face across each loop edge
+    /// it takes (folds are refused).
+    pub min_normal_dot: f64,
+    /// A loop is a hole, not a border, only when the unit normals of the faces across its
+    /// edges agree: |Σ n| ≥ this × their count. The open end of a tube has normals all
+    /// round (Σ n ≈ 0) and stays open.
+    pub min_loop_coherence: f64,
+    /// ... and when the loop, in the order the new faces would take, turns about that mean
+    /// normal: (vector area / its norm) · (Σ n / its norm) ≥ this. The outer border of an
+    /// open sheet turns the other way (its "hole" is the outside) and stays open.
+    pub min_loop_alignment: f64,
+    /// Whether odd loops are paired by removing faces between them.
+    pub pair_odd_loops: bool,
+    /// At most this many faces are removed to join two odd loops (a path across edges).
+    pub max_path_faces: usize,
+}
+
+impl Default for CloseConfig {
+    fn default() -> Self {
+        CloseConfig {
+            enabled: true,
+            max_loop_edges: 40,
+            min_scaled_jacobian: 0.0,
+            min_normal_dot: -0.3,
+            min_loop_coherence: 0.5,
+            min_loop_alignment: 0.5,
+            pair_odd_loops: true,
+            max_path_faces: 2,
+        }
+    }
+}
+
+/// What [`close_holes`] did.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct CloseReport {
+    /// Faces removed to merge two odd loops (and not put back).
+    pub faces_removed: usize,
+    /// Loops closed by quadrangulation (a merged pair counts once).
+    pub loops_closed: usize,
+    /// Quads added.
+    pub quads_added: usize,
+}
+
+/// The quads (corner lists in loop order) that close the loop `vs` (the from-vertices of
+/// its boundary half-edges, in order), or `None` when no quadrangulation meets the bounds.
+/// `across[k]` is the unit normal of the face across the loop's edge `vs[k] → vs[k + 1]`
+/// (oriented as the new faces will be), if there is one. Chords that are edges of `mesh`
+/// are not used. Of all quadrangulations over the loop's vertices that meet the bounds
+/// it returns one of least Σ(1 − scaled Jacobian).
+///
+/// # Panics
+/// If `across` is shorter than `vs` or a vertex of `vs` has no position.
+pub fn quadrangulate(
+    mesh: &HalfedgeMesh,
+    pos: &[[f64; 3]],
+    vs: &[u32],
+    across: &[Option<[f64; 3]>],
+    cfg: &CloseConfig,
+) -> Option<Vec<[u32; 4]>> {
+    let n = vs.len();
+    if n < 4 || n % 2 == 1 {
+        return None;
+    }
+    // A chord (i, j) is usable when it joins two distinct vertices not already joined.
+    let chord_ok = |i: usize, j: usize| {
+        if j == i + 1 || (i == 0 && j == n - 1) {
+            return true; // a loop edge
+        }
+        vs[i] != vs[j] && mesh.find_halfedge(VertexId(vs[i]), VertexId(vs[j])).is_none()
+    };
+    let quad_cost = |c: [usize; 4]| -> Option<f64> {
+        let q = c.map(|k| vs[k]);
+        if (0..4).any(|a| (a + 1..4).any(|b| q[a] == q[b])) {
+            return None;
+        }
+        let p = q.map(|v| pos[v as usize]);
+        if is_degenerate_quad(&p) {
+            return None;
+        }
+        let sj = scaled_jacobian(&p);
+        if sj.is_nan() || sj < cfg.min_scaled_jacobian {
+            return None;
+        }
+        let nq = quad_normal(&p)?;
+        for s in 0..4 {
+            let (a, b) = (c[s], c[(s + 1) % 4]);
+            let k = if b == a + 1 {
+                a
+            } else if a == n - 1 && b == 0 {
+                n - 1
+            } else {
+                continue;
+            };
+            if let Some(m) = across[k] {
+                if dot(nq, m) < cfg.min_normal_dot {
+                    return None;
+                }
+            }
+        }
+        Some(1.0 - sj)
+    };
+    // best[i][j] for the sub-polygon vs[i..=j] closed by the chord (i, j), j − i odd.
+    const NONE: f64 = f64::INFINITY;
+    let mut best = vec![vec![NONE; n]; n];
+    let mut arg = vec![vec![(0usize, 0usize); n]; n];
+    for i in 0..n - 1 {
+        best[i][i + 1] = 0.0;
+    }
+    for len in (3..n).step_by(2) {
+        for i in 0..n - len {
+            let j = i + len;
+            if !chord_ok(i, j) {
+                continue;
+            }
+            let mut b_cost = NONE;
+            let mut b_arg = (0, 0);
+            for a in (i + 1..j).step_by(2) {
+                if best[i][a] == NONE {
+                    continue;
+                }
+                for b in (a + 1..j).step_by(2) {
+                    let rest = best[i][a] + best[a][b] + best[b][j];
+                    if rest >= b_cost {
+                        continue;
+                    }
+                    if let Some(c) = quad_cost([i, a, b, j]) {
+                        if rest + c < b_cost {
+                            b_cost = rest + c;
+                            b_arg = (a, b);
+                        }
+                    }
+                }
+            }
+            best[i][j] = b_cost;
+            arg[i][j] = b_arg;
+        }
+    }
+    if best[0][n - 1] == NONE {
+        return None;
+    }
+    let mut quads = Vec::with_capacity(n / 2 - 1);
+    let mut stack = vec![(0usize, n - 1)];
+    while let Some((i, j)) = stack.pop() {
+        if j == i + 1 {
+            continue;
+        }
+        let (a, b) = arg[i][j];
+        quads.push([vs[i], vs[a], vs[b], vs[j]]);
+        stack.extend([(i, a), (a, b), (b, j)]);
+    }
+    Some(quads)
+}
+
+/// Whether the loop `vs` (with the normals across its edges) is a hole in a surface
+/// rather than a border of it: see [`CloseConfig::min_loop_coherence`] and
+/// [`CloseConfig::min_loop_alignment`].
+fn is_hole(pos: &[[f64; 3]], vs: &[u32], across: &[Option<[f64; 3]>], cfg: &CloseConfig) -> bool {
+    let mut sum = [0.0; 3];
+    let mut count = 0usize;
+    for n in across.iter().flatten() {
+        sum = add(sum, *n);
+        count += 1;
+    }
+    if count == 0 || norm(sum) < cfg.min_loop_coherence * count as f64 {
+        return false;
+    }
+    // Vector area about the loop's centroid (translation-invariant, well conditioned).
+    let c = vs.iter().fold([0.0; 3], |acc, &v| add(acc, pos[v as usize]));
+    let c = scale(c, 1.0 / vs.len() as f64);
+    let mut area = [0.0; 3];
+    for k in 0..vs.len() {
+        let a = sub(pos[vs[k] as usize], c);
+        let b = sub(pos[vs[(k + 1) % vs.len()] as usize], c);
+        area = add(area, cross(a, b));
+    }
+    match (normalize(area), normalize(sum)) {
+        (Some(a), Some(n)) => dot(a, n) >= cfg.min_loop_alignment,
+        _ => false,
+    }
+}
+
+/// Unit normal of the face across boundary half-edge `h`, if any.
+fn normal_across(mesh: &HalfedgeMesh, pos: &[[f64; 3]], h: HalfedgeId) -> Option<[f64; 3]> {
+    let f = mesh.face(h.opposite())?;
+    quad_normal(&mesh.face_vertices(f).map(|v| pos[v.idx()]))
+}
+
+/// Closes the loop through boundary half-edge `start` by quadrangulation; on failure
+/// the mesh is unchanged. Returns the number of quads added (0 = not closed).
+fn close_loop(mesh: &mut HalfedgeMesh, pos: &[[f64; 3]], start: HalfedgeId, cfg: &CloseConfig) -> usize {
+    let mut lp = vec![start];
+    let mut h = mesh.next(start);
+    while h != start {
+        if lp.len() > cfg.max_loop_edges {
+            return 0;
+        }
+        lp.push(h);
+        h = mesh.next(h);
+    }
+    let vs: Vec<u32> = lp.iter().map(|&h| mesh.from_vertex(h).0).collect();
+    let across: Vec<Option<[f64; 3]>> = lp.iter().map(|&h| normal_across(mesh, pos, h)).collect();
+    if !is_hole(pos, &vs, &across, cfg) {
+        return 0;
+    }
+    let Some(quads) = quadrangulate(mesh, pos, &vs, &across, cfg) else { return 0 };
+    let mut added: Vec<FaceId> = Vec::with_capacity(quads.len());
+    for q in &quads {
+        match mesh.add_face(q.map(VertexId)) {
+            Ok(f) => added.push(f),
+            Err(_) => {
+                for &f in added.iter().rev() {
+                    mesh.remove_face(f).expect("internal error: a face just added comes off again");
+                }
+                return 0;
+            }
+        }
+    }
+    added.len()
+}
+
+/// Which loop each boundary half-edge is on (index into `loops`), by half-edge index.
+fn loop_ids(mesh: &HalfedgeMesh, loops: &[Vec<HalfedgeId>]) -> Vec<u32> {
+    let mut id = vec![u32::MAX; mesh.halfedge_capacity()];
+    for (l, lp) in loops.iter().enumerate() {
+        for h in lp {
+            id[h.idx()] = l as u32;
+        }
+    }
+    id
+}
+
+/// Pairs odd loops and quadrangulates even ones, as the module documentation says.
+/// `positions` has one entry per mesh vertex; nothing is added to it.
+pub fn close_holes(mesh: &mut HalfedgeMesh, positions: &[[f64; 3]], cfg: &CloseConfig) -> CloseReport {
+    let mut report = CloseReport::default();
+    if !cfg.enabled {
+        return report;
+    }
+    if cfg.pair_odd_loops {
+        pair_odd_loops(mesh, positions, cfg, &mut report);
+    }
+    for lp in mesh.boundary_loops() {
+        if lp.len() % 2 == 1 || lp.len() > cfg.max_loop_edges || !mesh.is_boundary(lp[0]) {
+            continue;
+        }
+        let q = close_loop(mesh, positions, lp[0], cfg);
+        if q > 0 {
+            report.loops_closed += 1;
+            report.quads_added += q;
+        }
+    }
+    report
+}
+
+/// Merges odd loops in pairs through a face between them and closes the merged loop (see
+/// the module documentation). Passes over the loops until one changes nothing; a face
+/// whose removal did not lead to a closed loop is put back and not tried again.
+fn pair_odd_loops(mesh: &mut HalfedgeMesh, pos: &[[f64; 3]], cfg: &CloseConfig, report: &mut CloseReport) {
+    let mut failed: std::collections::HashSet<[u32; 4]> = std::collections::HashSet::new();
+    let key = |c: [VertexId; 4]| {
+        let mut k = c.map(|v| v.0);
+        k.sort_unstable();
+        k
+    };
+    for _pass in 0..16 {
+        let loops = mesh.boundary_loops();
+        let id = loop_ids(mesh, &loops);
+        // Loops whose half-edge ids may be stale after a removal (or put back) this pass.
+        let mut touched = vec![false; loops.len()];
+        let odd = |m: usize| loops[m].len() % 2 == 1 && loops[m].len() <= cfg.max_loop_edges;
+        let mut changed = false;
+        for (l, lp) in loops.iter().enumerate() {
+            if touched[l] || !odd(l) {
+                continue;
+            }
+            for path in face_paths(mesh, lp, l, &id, &|m| !touched[m] && odd(m), cfg.max_path_faces) {
+                if path.iter().any(|&f| !mesh.is_face_alive(f)) {
+                    continue;
+                }
+                let corners: Vec<[VertexId; 4]> = path.iter().map(|&f| mesh.face_vertices(f)).collect();
+                if corners.iter().any(|c| failed.contains(&key(*c))) {
+                    continue;
+                }
+                let around: Vec<usize> = path
+                    .iter()
+                    .flat_map(|&f| mesh.face_halfedges(f))
+                    .filter(|g| mesh.is_boundary(g.opposite()))
+                    .map(|g| id.get(g.opposite().idx()).copied().unwrap_or(u32::MAX))
+                    .filter(|&m| m != u32::MAX)
+                    .map(|m| m as usize)
+                    .collect();
+                if around.iter().any(|&m| touched[m]) {
+                    continue;
+                }
+                // Removed from the loop's side outward, so each face borders the hole.
+                let mut removed = 0;
+                while removed < path.len() && mesh.remove_face(path[removed]).is_ok() {
+                    removed += 1;
+                }
+                let closed = if removed == path.len() {
+                    for &m in &around {
+                        touched[m] = true;
+                    }
+                    // The merged loop runs through the removed faces' corners.
+                    let start = corners[removed - 1]
+                        .iter()
+                        .find_map(|&v| mesh.vertex_outgoing(v).find(|&h| mesh.is_boundary(h)));
+                    start.map_or(0, |s| close_loop(mesh, pos, s, cfg))
+                } else {
+                    0
+                };
+                if closed > 0 {
+                    report.faces_removed += removed;
+                    report.loops_closed += 1;
+                    report.quads_added += closed;
+                    changed = true;
+                    break;
+                }
+                for c in corners[..removed].iter().rev() {
+                    mesh.add_face(*c).expect("internal error: a face just removed goes back");
+                }
+                if removed == path.len() {
+                    for c in &corners {
+                        failed.insert(key(*c));
+                    }
+                    break;
+                }
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+}
+
+/// Paths of faces (at most `max_faces` long, shortest first, each starting at a face
+/// across loop `l` and moving across interior edges) whose last face has an edge on a
+/// loop `m != l` with `want(m)`. Breadth-first; at most a few dozen paths.
+fn face_paths(
+    mesh: &HalfedgeMesh,
+    lp: &[HalfedgeId],
+    l: usize,
+    id: &[u32],
+    want: &dyn Fn(usize) -> bool,
+    max_faces: usize,
+) -> Vec<Vec<FaceId>> {
+    use std::collections::HashMap;
+    let mut parent: HashMap<u32, Option<FaceId>> = HashMap::new();
+    let mut frontier: Vec<FaceId> = Vec::new();
+    for &h in lp {
+        if let Some(f) = mesh.face(h.opposite()) {
+            if parent.insert(f.0, None).is_none() {
+                frontier.push(f);
+            }
+        }
+    }
+    let mut paths = Vec::new();
+    for depth in 1..=max_faces {
+        for &f in &frontier {
+            let hits = mesh.face_halfedges(f).iter().any(|g| {
+                let o = g.opposite();
+                let m = id.get(o.idx()).copied().unwrap_or(u32::MAX);
+                m != u32::MAX && m as usize != l && mesh.is_boundary(o) && want(m as usize)
+            });
+            if hits {
+                let mut path = vec![f];
+                let mut c = f;
+                while let Some(Some(p)) = parent.get(&c.0) {
+                    path.push(*p);
+                    c = *p;
+                }
+                path.reverse();
+                paths.push(path);
+                if paths.len() >= 32 {
+                    return paths;
+                }
+            }
+        }
+        if depth == max_faces {
+            break;
+        }
+        let mut next = Vec::new();
+        for &f in &frontier {
+            for g in mesh.face_halfedges(f) {
+                if let Some(n) = mesh.face(g.opposite()) {
+                    if let std::collections::hash_map::Entry::Vacant(e) = parent.entry(n.0) {
+                        e.insert(Some(f));
+                        next.push(n);
+                    }
+                }
+            }
+        }
+        frontier = next;
+    }
+    paths
+}

@@ -1,0 +1,277 @@
+//! Two repairs between the manifold insertion and the hole filling (not in the paper;
+//! README "Deviations"):
+//! - [`remove_small_open_components`]: floaters — a lone quad or a small open patch away
+//!   from the surface — are almost always wrong faces (a quad over noise points, or a
+//!   wrong quad that lost every neighbour to a likelier rival); they add four or more
+//!   boundary edges each and are never holes' fillers.
+//! - [`rescue_faces`]: a hole left by the classifier is usually tiled by candidates it
+//!   scored under the threshold. Candidates that glue to the hole's border along at least
+//!   `min_glued` edges (so they fill a corner of the hole instead of growing outward) are
+//!   inserted, most-glued and most probable first, through [`HalfedgeMesh::add_face`], so
+//!   the mesh stays manifold. Two of those edges must border different faces: a quad
+//!   over two sides of one face would fold over it.
+
+use std::collections::HashMap;
+
+use super::halfedge::HalfedgeMesh;
+use super::handles::{FaceId, VertexId};
+
+/// Settings of the rescue of candidates at holes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RescueConfig {
+    /// Whether the rescue runs.
+    pub enabled: bool,
+    /// Candidates with a lower probability are never rescued.
+    pub min_prob: f32,
+    /// A candidate is rescued only when at least this many of its edges are boundary
+    /// edges of the mesh (2 or more: it fills a corner of a hole, never extends a border
+    /// by a free-standing strip).
+    pub min_glued: usize,
+    /// Passes over the boundary; each inserts what fits, the next sees the new border.
+    pub max_passes: usize,
+}
+
+impl Default for RescueConfig {
+    fn default() -> Self {
+        RescueConfig { enabled: true, min_prob: 0.1, min_glued: 2, max_passes: 16 }
+    }
+}
+
+/// Removes every connected component that has a boundary and at most `max_faces`
+/// faces, unless it is a largest component (a small open surface on its own is the
+/// result, not a floater). Returns how many faces it removed. Closed components stay
+/// whatever their size (a small closed part is a real part).
+pub fn remove_small_open_components(mesh: &mut HalfedgeMesh, max_faces: usize) -> usize {
+    if max_faces == 0 {
+        return 0;
+    }
+    let comps = mesh.connected_components();
+    let largest = comps.iter().map(Vec::len).max().unwrap_or(0);
+    let mut removed = 0;
+    for comp in comps {
+        if comp.len() > max_faces || comp.len() == largest {
+            continue;
+        }
+        let open =
+            comp.iter().any(|&f| mesh.face_halfedges(f).iter().any(|h| mesh.is_boundary(h.opposite())));
+        if !open {
+            continue;
+        }
+        removed += remove_all(mesh, &comp);
+    }
+    removed
+}
+
+/// Removes the faces `fs` (one component), retrying those whose removal would split a
+/// corner's fan until the faces around them are gone. Returns how many it removed.
+fn remove_all(mesh: &mut HalfedgeMesh, fs: &[FaceId]) -> usize {
+    let mut left: Vec<FaceId> = fs.to_vec();
+    let mut removed = 0;
+    while !left.is_empty() {
+        let before = left.len();
+        left.retain(|&f| {
+            if mesh.remove_face(f).is_ok() {
+                removed += 1;
+                false
+            } else {
+                true
+            }
+        });
+        if left.len() == before {
+            break; // cannot happen for a whole component; never loop forever
+        }
+    }
+    removed
+}
+
+/// Inserts candidates from `pool` (indices into `faces`/`probs`) at the mesh's holes, as
+/// the module documentation says. Candidates below `cfg.min_prob`, or already in the mesh,
+/// are ignored. Returns the indices inserted, in insertion order.
+///
+/// # Panics
+/// If an index of `pool` is out of range of `faces` or `probs`, or a face's vertex is not
+/// a vertex of `mesh`.
+pub fn rescue_faces(
+    mesh: &mut HalfedgeMesh,
+    faces: &[[u32; 4]],
+    probs: &[f32],
+    pool: &[usize],
+    cfg: &RescueConfig,
+) -> Vec<usize> {
+    let mut inserted = Vec::new();
+    if !cfg.enabled {
+        return inserted;
+    }
+    // Undirected edge → pool candidates on it.
+    let key = |a: u32, b: u32| if a < b { (a, b) } else { (b, a) };
+    let mut by_edge: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
+    for &c in pool {
+        if probs[c] < cfg.min_prob || !probs[c].is_finite() {
+            continue;
+        }
+        let f = faces[c];
+        for i in 0..4 {
+            by_edge.entry(key(f[i], f[(i + 1) % 4])).or_default().push(c as u32);
+        }
+    }
+    if by_edge.is_empty() {
+        return inserted;
+    }
+    let mut used = vec![false; faces.len()];
+    let mut stamp = vec![0u32; faces.len()];
+    // Boundary edges of the quad: `None` when an edge already has two faces (it cannot
+    // go in), else how many of its edges exist with one face.
+    // Also `None` when two of those edges belong to one face: the quad would share three
+    // corners with it and fold over it (at a convex corner of a border).
+    let glued = |mesh: &HalfedgeMesh, f: &[u32; 4]| -> Option<usize> {
+        let mut across: [Option<FaceId>; 4] = [None; 4];
+        let mut g = 0;
+        for i in 0..4 {
+            let (a, b) = (VertexId(f[i]), VertexId(f[(i + 1) % 4]));
+            if let Some(h) = mesh.find_halfedge(a, b) {
+                if !mesh.is_boundary(h) && !mesh.is_boundary(h.opposite()) {
+                    return None;
+                }
+                let nb = mesh.face(h).or(mesh.face(h.opposite()));
+                if across[..g].contains(&nb) {
+                    return None;
+                }
+                across[g] = nb;
+                g += 1;
+            }
+        }
+        Some(g)
+    };
+    for pass in 1..=cfg.max_passes as u32 {
+        let mut cands: Vec<(usize, f32, u32)> = Vec::new();
+        for lp in mesh.boundary_loops() {
+            for h in lp {
+                let (a, b) = (mesh.from_vertex(h).0, mesh.to_vertex(h).0);
+                let Some(list) = by_edge.get(&key(a, b)) else { continue };
+                for &c in list {
+                    let c = c as usize;
+                    if used[c] || stamp[c] == pass {
+                        continue;
+                    }
+                    stamp[c] = pass;
+                    if let Some(g) = glued(mesh, &faces[c]) {
+                        if g >= cfg.min_glued {
+                            cands.push((g, probs[c], c as u32));
+                        }
+                    }
+                }
+            }
+        }
+        // Most glued first, then most probable, then lowest index.
+        cands.sort_by(|x, y| y.0.cmp(&x.0).then(y.1.total_cmp(&x.1)).then(x.2.cmp(&y.2)));
+        let mut added = 0;
+        for &(_, _, c) in &cands {
+            let c = c as usize;
+            // Earlier insertions of this pass changed the border: check again.
+            match glued(mesh, &faces[c]) {
+                Some(g) if g >= cfg.min_glued => {}
+                _ => continue,
+            }
+            if mesh.add_face(faces[c].map(VertexId)).is_ok() {
+                used[c] = true;
+                inserted.push(c);
+                added += 1;
+            }
+        }
+        if added == 0 {
+            break;
+        }
+    }
+    inserted
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::validate::validate;
+
+    fn grid(n: usize) -> (Vec<[f64; 3]>, Vec<[u32; 4]>) {
+        let m = crate::mesh::shapes::grid(n, n, n as f64, n as f64);
+        (m.vertices, m.quads)
+    }
+
+    #[test]
+    fn a_hole_is_tiled_by_its_low_probability_candidates() {
+        let (p, q) = grid(5);
+        // Drop the 3 × 3 block in the middle; offer its faces and wrong rivals (each
+        // overlapping a true face, more probable) as the pool.
+        let keep: Vec<[u32; 4]> = q
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !matches!(i % 5, 1..=3) || !matches!(i / 5, 1..=3))
+            .map(|(_, f)| *f)
+            .collect();
+        let mut mesh = HalfedgeMesh::from_quads(p.len(), &keep).unwrap();
+        let hole: Vec<[u32; 4]> = q
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| matches!(i % 5, 1..=3) && matches!(i / 5, 1..=3))
+            .map(|(_, f)| *f)
+            .collect();
+        let mut pool_faces = hole.clone();
+        // A wrong kite on the same corner as the true face (1, 1): it takes the hole's
+        // border edges 7 → 8 and 13 → 7 (vertex (i, j) is 6j + i) and leaves through
+        // (3, 3) = 21. Less probable than the true face, so it loses that corner.
+        pool_faces.push([7, 8, 21, 13]);
+        let mut probs = vec![0.3; hole.len()];
+        probs.push(0.2);
+        let pool: Vec<usize> = (0..pool_faces.len()).collect();
+        let got = rescue_faces(&mut mesh, &pool_faces, &probs, &pool, &RescueConfig::default());
+        validate(&mesh).unwrap();
+        assert!(mesh.is_closed() || mesh.boundary_loops().len() == 1, "only the outer border is left");
+        assert_eq!(mesh.n_faces(), 25);
+        assert_eq!(got.len(), 9);
+        assert!(!got.contains(&(pool_faces.len() - 1)), "the overlapping quad cannot go in");
+    }
+
+    #[test]
+    fn nothing_grows_outward_and_low_probabilities_are_ignored() {
+        let (p, q) = grid(3);
+        let mut mesh = HalfedgeMesh::from_quads(p.len() + 20, &q).unwrap();
+        let before = mesh.clone();
+        // A quad glued to the outer border along one edge only (it would extend the border)
+        // and an inner face below min_prob.
+        let faces = vec![[1, 0, 16, 17], [0, 1, 5, 4]];
+        let got = rescue_faces(&mut mesh, &faces, &[0.9, 0.9], &[0], &RescueConfig::default());
+        assert!(got.is_empty());
+        assert_eq!(mesh, before);
+        let (p, q) = grid(3);
+        let mut mesh = HalfedgeMesh::from_quads(p.len(), &q[1..]).unwrap();
+        let cfg = RescueConfig::default();
+        assert!(rescue_faces(&mut mesh, &q, &[0.01; 9], &[0], &cfg).is_empty());
+        assert_eq!(rescue_faces(&mut mesh, &q, &[0.5; 9], &[0], &cfg), vec![0]);
+        let off = RescueConfig { enabled: false, ..cfg };
+        let mut m2 = HalfedgeMesh::from_quads(p.len(), &q[1..]).unwrap();
+        assert!(rescue_faces(&mut m2, &q, &[0.5; 9], &[0], &off).is_empty());
+    }
+
+    #[test]
+    fn small_open_components_go_and_closed_ones_stay() {
+        let (_, q) = grid(4);
+        let mut faces = q.clone();
+        // A lone quad and a 2-face strip far away, and a closed cube.
+        faces.push([100, 101, 102, 103]);
+        faces.push([110, 111, 114, 113]);
+        faces.push([111, 112, 115, 114]);
+        let cube = crate::mesh::shapes::cube_sphere(1);
+        let off = 120u32;
+        faces.extend(cube.quads.iter().map(|f| f.map(|v| v + off)));
+        let n = off as usize + cube.vertices.len();
+        let mut mesh = HalfedgeMesh::from_quads(n, &faces).unwrap();
+        assert_eq!(remove_small_open_components(&mut mesh, 0), 0);
+        let removed = remove_small_open_components(&mut mesh, 6);
+        validate(&mesh).unwrap();
+        assert_eq!(removed, 3);
+        assert_eq!(mesh.n_faces(), 16 + 6);
+        assert_eq!(mesh.connected_components().len(), 2);
+        // A lone quad, or two, on their own are the result: they stay.
+        let mut lone = HalfedgeMesh::from_quads(8, &[[0, 1, 2, 3], [4, 5, 6, 7]]).unwrap();
+        assert_eq!(remove_small_open_components(&mut lone, 6), 0);
+        assert_eq!(lone.n_faces(), 2);
+    }
+}

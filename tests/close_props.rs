@@ -1,0 +1,283 @@
+//! The closing of loops the hole filling leaves (`mesh::close`) and the rescue of
+//! candidates at holes (`mesh::rescue`): the quadrangulation's optimum against brute
+//! force, and mesh invariants (validator, border never longer) on grids with holes.
+
+use point2quad::mesh::close::{close_holes, quadrangulate, CloseConfig};
+use point2quad::mesh::halfedge::HalfedgeMesh;
+use point2quad::mesh::handles::FaceId;
+use point2quad::mesh::rescue::{rescue_faces, RescueConfig};
+use point2quad::mesh::shapes::grid;
+use point2quad::mesh::validate::validate;
+use proptest::prelude::*;
+
+/// Scaled Jacobian of a planar quad in the xy plane with corners in order, by its own
+/// formula (min over corners of the sine of the corner angle, signed).
+fn sj(p: &[[f64; 3]; 4]) -> f64 {
+    (0..4)
+        .map(|i| {
+            let a = p[(i + 3) % 4];
+            let b = p[i];
+            let c = p[(i + 1) % 4];
+            let (e0, e1) = ([b[0] - a[0], b[1] - a[1]], [c[0] - b[0], c[1] - b[1]]);
+            (e0[0] * e1[1] - e0[1] * e1[0]) / ((e0[0].hypot(e0[1])) * (e1[0].hypot(e1[1])))
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn area(p: &[[f64; 3]]) -> f64 {
+    let n = p.len();
+    0.5 * (0..n).map(|i| p[i][0] * p[(i + 1) % n][1] - p[(i + 1) % n][0] * p[i][1]).sum::<f64>()
+}
+
+/// Least Σ(1 − SJ) over every set of n/2 − 1 quads on the vertices of the convex polygon
+/// `pts` whose interiors are disjoint and whose areas add up to the polygon's.
+fn brute_force(pts: &[[f64; 3]]) -> f64 {
+    let n = pts.len();
+    let mut quads: Vec<[usize; 4]> = Vec::new();
+    for a in 0..n {
+        for b in a + 1..n {
+            for c in b + 1..n {
+                for d in c + 1..n {
+                    quads.push([a, b, c, d]);
+                }
+            }
+        }
+    }
+    // Two quads of a convex polygon have disjoint interiors iff all of one's vertices lie
+    // in one closed arc between consecutive vertices of the other.
+    let disjoint = |x: &[usize; 4], y: &[usize; 4]| {
+        (0..4).any(|k| {
+            let (lo, hi) = (x[k], x[(k + 1) % 4]);
+            y.iter().all(|&v| if lo < hi { v >= lo && v <= hi } else { v >= lo || v <= hi })
+        })
+    };
+    let total = area(pts);
+    let k = n / 2 - 1;
+    let mut best = f64::INFINITY;
+    let mut chosen: Vec<usize> = Vec::new();
+    fn rec(
+        start: usize,
+        k: usize,
+        quads: &[[usize; 4]],
+        chosen: &mut Vec<usize>,
+        f: &mut dyn FnMut(&[usize]),
+        ok: &dyn Fn(&[usize; 4], &[usize; 4]) -> bool,
+    ) {
+        if chosen.len() == k {
+            f(chosen);
+            return;
+        }
+        for q in start..quads.len() {
+            if chosen.iter().all(|&c| ok(&quads[c], &quads[q])) {
+                chosen.push(q);
+                rec(q + 1, k, quads, chosen, f, ok);
+                chosen.pop();
+            }
+        }
+    }
+    let mut visit = |set: &[usize]| {
+        let qp: Vec<[[f64; 3]; 4]> = set.iter().map(|&q| quads[q].map(|v| pts[v])).collect();
+        let a: f64 = qp.iter().map(|p| area(p)).sum();
+        if (a - total).abs() < 1e-9 * total.abs().max(1.0) {
+            best = best.min(qp.iter().map(|p| 1.0 - sj(p)).sum());
+        }
+    };
+    rec(0, k, &quads, &mut chosen, &mut visit, &disjoint);
+    best
+}
+
+fn boundary_edges(m: &HalfedgeMesh) -> usize {
+    m.boundary_loops().iter().map(Vec::len).sum()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    /// On points of a circle (always a convex polygon), the quadrangulation's cost is the
+    /// brute-force optimum, and its quads partition the polygon.
+    #[test]
+    fn quadrangulation_is_optimal(half in 2usize..5, gaps in prop::collection::vec(0.2f64..1.0, 8)) {
+        let n = 2 * half;
+        let sum: f64 = gaps[..n].iter().sum();
+        let mut t = 0.0;
+        let pts: Vec<[f64; 3]> = gaps[..n]
+            .iter()
+            .map(|g| {
+                t += g / sum * std::f64::consts::TAU;
+                [t.cos(), t.sin(), 0.0]
+            })
+            .collect();
+        let mesh = HalfedgeMesh::new(n);
+        let vs: Vec<u32> = (0..n as u32).collect();
+        let quads = quadrangulate(&mesh, &pts, &vs, &vec![None; n], &CloseConfig::default()).unwrap();
+        prop_assert_eq!(quads.len(), n / 2 - 1);
+        let qp: Vec<[[f64; 3]; 4]> = quads.iter().map(|q| q.map(|v| pts[v as usize])).collect();
+        let a: f64 = qp.iter().map(|p| area(p)).sum();
+        prop_assert!((a - area(&pts)).abs() < 1e-9, "quads do not tile the polygon");
+        let cost: f64 = qp.iter().map(|p| 1.0 - sj(p)).sum();
+        let best = brute_force(&pts);
+        prop_assert!((cost - best).abs() < 1e-9, "cost {} vs brute force {}", cost, best);
+    }
+
+    /// Grids with faces removed at random: closing keeps the mesh valid, never lengthens
+    /// the border, adds no vertex, and closes every interior hole of one face pair or
+    /// less exactly as it was.
+    #[test]
+    fn closing_keeps_the_mesh_valid(nu in 3usize..8, nv in 3usize..8, seed in any::<u64>(), share in 0.05f64..0.5) {
+        let g = grid(nu, nv, nu as f64, nv as f64);
+        let mut rng = point2quad::rng::Rng::new(seed);
+        let mut mesh = HalfedgeMesh::from_quads(g.vertices.len(), &g.quads).unwrap();
+        for f in 0..g.quads.len() {
+            if rng.uniform(0.0, 1.0) < share {
+                let _ = mesh.remove_face(FaceId(f as u32));
+            }
+        }
+        validate(&mesh).unwrap();
+        let (faces0, border0) = (mesh.n_faces(), boundary_edges(&mesh));
+        let r = close_holes(&mut mesh, &g.vertices, &CloseConfig::default());
+        validate(&mesh).unwrap();
+        prop_assert!(boundary_edges(&mesh) <= border0);
+        prop_assert_eq!(mesh.n_faces(), faces0 - r.faces_removed + r.quads_added);
+        prop_assert_eq!(mesh.n_vertices(), g.vertices.len());
+        for f in mesh.faces() {
+            let p = mesh.face_vertices(f).map(|v| g.vertices[v.idx()]);
+            prop_assert!(sj(&p) > 0.0, "a reflex or flat corner {:?}", p);
+        }
+    }
+
+    /// Sparse holes (no two removed faces share a vertex) are tiled back exactly by the
+    /// rescue from a pool of the true faces and less probable wrong quads over the same
+    /// corners; the border never gets longer and only pool faces above min_prob go in.
+    #[test]
+    fn rescue_restores_sparse_holes(n in 3usize..8, seed in any::<u64>()) {
+        let g = grid(n, n, n as f64, n as f64);
+        let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+        let mut rng = point2quad::rng::Rng::new(seed);
+        let mut removed = vec![false; n * n];
+        for f in 0..n * n {
+            let (i, j) = (f % n, f / n);
+            // No two removed faces share a vertex (that vertex would hold two fans).
+            let nb_removed = (i > 0 && removed[f - 1])
+                || (j > 0 && (removed[f - n] || (i > 0 && removed[f - n - 1]) || (i + 1 < n && removed[f - n + 1])));
+            // The corner face always goes: there the true face and its rival glue on
+            // the same number of edges and only the probability decides.
+            if !nb_removed && (f == 0 || rng.uniform(0.0, 1.0) < 0.3) {
+                removed[f] = true;
+            }
+        }
+        let kept: Vec<[u32; 4]> = (0..n * n).filter(|&f| !removed[f]).map(|f| g.quads[f]).collect();
+        prop_assume!(!kept.is_empty());
+        // Two extra isolated vertices per face for the rivals to leave through.
+        let nv = g.vertices.len();
+        let mut mesh = HalfedgeMesh::from_quads(nv + 2 * n * n, &kept).unwrap();
+        let mut pool_faces = Vec::new();
+        let mut probs = Vec::new();
+        let mut open = Vec::new();
+        for f in (0..n * n).filter(|&f| removed[f]) {
+            let (i, j) = (f % n, f / n);
+            let (x, y) = ((nv + 2 * f) as u32, (nv + 2 * f + 1) as u32);
+            pool_faces.push(g.quads[f]);
+            if f != 0 && rng.uniform(0.0, 1.0) < 0.2 {
+                // Offered only below min_prob: this hole stays open.
+                probs.push(0.05);
+                open.push(f);
+                continue;
+            }
+            probs.push(0.3 + 0.6 * rng.uniform(0.0, 1.0) as f32);
+            // A wrong kite on the face's corner (i + 1, j + 1), over its right and top
+            // sides, less probable than the true face.
+            pool_faces.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1), x]);
+            probs.push(0.25);
+            // A likelier one on the opposite corner, but below min_prob.
+            pool_faces.push([id(i, j + 1), id(i, j), id(i + 1, j), y]);
+            probs.push(0.05);
+        }
+        let border0 = boundary_edges(&mesh);
+        let pool: Vec<usize> = (0..pool_faces.len()).collect();
+        let cfg = RescueConfig::default();
+        let got = rescue_faces(&mut mesh, &pool_faces, &probs, &pool, &cfg);
+        validate(&mesh).unwrap();
+        prop_assert!(boundary_edges(&mesh) <= border0);
+        prop_assert!(got.iter().all(|&c| probs[c] >= cfg.min_prob));
+        let mut want: Vec<[u32; 4]> = g.quads.iter().enumerate().filter(|(f, _)| !open.contains(f)).map(|(_, q)| q).map(|q| { let mut k = *q; k.sort_unstable(); k }).collect();
+        want.sort_unstable();
+        let mut have: Vec<[u32; 4]> = mesh.faces().map(|f| { let mut k = mesh.face_vertices(f).map(|v| v.0); k.sort_unstable(); k }).collect();
+        have.sort_unstable();
+        prop_assert_eq!(have, want);
+    }
+}
+
+/// Two triangle holes left by a wrong quad over the diagonal of two true ones: the
+/// pairing removes it and the two true quads come back.
+#[test]
+fn a_diagonal_quad_between_two_triangles_is_replaced_by_the_true_pair() {
+    let g = grid(4, 3, 4.0, 3.0);
+    let id = |i: u32, j: u32| j * 5 + i;
+    // True faces (1, 1) and (2, 1) make the hexagon a b c d e f.
+    let (a, b, c, d, e, f) = (id(1, 1), id(2, 1), id(3, 1), id(3, 2), id(2, 2), id(1, 2));
+    let key = |q: [u32; 4]| {
+        let mut k = q;
+        k.sort_unstable();
+        k
+    };
+    let dropped = [key([a, b, e, f]), key([b, c, d, e])];
+    let mut faces: Vec<[u32; 4]> = g.quads.iter().copied().filter(|q| !dropped.contains(&key(*q))).collect();
+    assert_eq!(faces.len(), g.quads.len() - 2);
+    faces.push([a, b, d, e]);
+    let mut mesh = HalfedgeMesh::from_quads(g.vertices.len(), &faces).unwrap();
+    let lens: Vec<usize> = mesh.boundary_loops().iter().map(Vec::len).filter(|&l| l == 3).collect();
+    assert_eq!(lens.len(), 2, "two triangle holes");
+    let r = close_holes(&mut mesh, &g.vertices, &CloseConfig::default());
+    validate(&mesh).unwrap();
+    assert_eq!((r.faces_removed, r.quads_added, r.loops_closed), (1, 2, 1), "{r:?}");
+    let mut have: Vec<[u32; 4]> = mesh.faces().map(|f| key(mesh.face_vertices(f).map(|v| v.0))).collect();
+    have.sort_unstable();
+    let mut want: Vec<[u32; 4]> = g.quads.iter().map(|q| key(*q)).collect();
+    want.sort_unstable();
+    assert_eq!(have, want);
+    // Without the pairing the triangles stay.
+    let mut m2 = HalfedgeMesh::from_quads(g.vertices.len(), &faces).unwrap();
+    let r2 = close_holes(&mut m2, &g.vertices, &CloseConfig { pair_odd_loops: false, ..Default::default() });
+    assert_eq!(r2.quads_added, 0);
+}
+
+/// A two-face hole is closed over its own vertices with the true chord.
+#[test]
+fn a_hexagon_hole_is_quadrangulated_back() {
+    let g = grid(4, 4, 4.0, 4.0);
+    let mut mesh = HalfedgeMesh::from_quads(g.vertices.len(), &g.quads).unwrap();
+    mesh.remove_face(FaceId(5)).unwrap();
+    mesh.remove_face(FaceId(6)).unwrap();
+    let r = close_holes(&mut mesh, &g.vertices, &CloseConfig::default());
+    validate(&mesh).unwrap();
+    assert_eq!((r.quads_added, r.loops_closed, r.faces_removed), (2, 1, 0));
+    assert_eq!(mesh.n_faces(), 16);
+    assert_eq!(boundary_edges(&mesh), 16, "only the outer border");
+    let off = close_holes(&mut mesh, &g.vertices, &CloseConfig { enabled: false, ..Default::default() });
+    assert_eq!(off.quads_added, 0);
+}
+
+/// Borders are not holes: the open ends of tubes (normals all round) and the outer border
+/// of a sheet (it turns the other way) stay open, and an already closed mesh is unchanged.
+#[test]
+fn borders_of_open_surfaces_stay_open() {
+    use point2quad::mesh::shapes;
+    let mut cases = vec![("sheet", grid(5, 3, 5.0, 3.0))];
+    for n in [4, 6, 8, 12, 16] {
+        cases.push(("tube", shapes::cylinder(n, 3, 1.0, 1.5, false)));
+    }
+    cases.push(("closed", shapes::cube_sphere(4)));
+    for (name, q) in cases {
+        let mut mesh = HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).unwrap();
+        let before = mesh.clone();
+        let r = close_holes(&mut mesh, &q.vertices, &CloseConfig::default());
+        assert_eq!(r.quads_added, 0, "{name}: {r:?}");
+        assert_eq!(mesh, before, "{name}");
+    }
+    // The same tube end, seen as a hole by a configuration without the border tests, is
+    // closed: the tests are what keeps it open.
+    let q = shapes::cylinder(8, 3, 1.0, 1.5, false);
+    let mut mesh = HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).unwrap();
+    let lax = CloseConfig { min_loop_coherence: 0.0, min_loop_alignment: -1.0, ..Default::default() };
+    assert!(close_holes(&mut mesh, &q.vertices, &lax).quads_added > 0);
+}

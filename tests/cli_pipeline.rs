@@ -391,3 +391,36 @@ fn refine_trains_rounds_that_reconstruct_reads() {
     assert!(err.contains("nowhere"), "{err}");
     assert!(!Path::new(&never).exists());
 }
+
+/// The closing steps of the post-process: with the shipped weights on a noisy cloud of
+/// a random synthetic shape (one whose reconstruction has holes), the default leaves no more border than the greedy fill alone (each step only
+/// removes border), both outputs are valid, the summary says what was done, and bad
+/// values of the new options are usage errors that write nothing.
+#[test]
+fn reconstruct_closing_options() {
+    let s = Scratch::new("close");
+    let cloud = s.p("cloud.xyz");
+    ok(&["synth", "--shape", "random", "-o", &cloud, "--noise", "0.1", "--seed", "5"]);
+    let border = |mesh: &str| {
+        let out = ok(&["eval", mesh, "--json"]);
+        let json = parse_json(String::from_utf8_lossy(&out.stdout).trim()).unwrap();
+        let q = point2quad::io::mesh_io::read_mesh(Path::new(mesh)).unwrap().to_quads().expect("pure quad");
+        validate(&HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).expect("manifold")).expect("valid");
+        json.get("boundary_edges").and_then(Json::num).unwrap()
+    };
+    let (full, plain) = (s.p("full.obj"), s.p("plain.obj"));
+    let out = ok(&["reconstruct", &cloud, "-o", &full]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("rescued") && err.contains("loops closed") && err.contains("floater"), "{err}");
+    ok(&["reconstruct", &cloud, "-o", &plain, "--no-rescue", "--no-close", "--max-floater-faces", "0"]);
+    let (b_full, b_plain) = (border(&full), border(&plain));
+    assert!(b_plain > 0.0, "the case must have holes");
+    assert!(b_full <= b_plain, "{b_full} > {b_plain}");
+    for (opt, v) in [("--rescue-min-prob", "1.5"), ("--rescue-min-prob", "x"), ("--max-floater-faces", "-1")]
+    {
+        let o = s.p("bad.obj");
+        let err = fails(&["reconstruct", &cloud, "-o", &o, opt, v], 2);
+        assert!(err.contains(opt), "{opt} {v}: {err}");
+        assert!(!Path::new(&o).exists());
+    }
+}

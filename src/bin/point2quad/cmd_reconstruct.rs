@@ -136,16 +136,22 @@ pub fn run(argv: &[String]) -> Result<()> {
         .as_ref()
         .map(|p| (p.hole_fill.quads_added(), p.refused_on_insertion + p.removed_by_score))
         .unwrap_or((0, 0));
+    let pp = rep.postprocess.clone().unwrap_or_default();
     // Through `output::stderr`: `eprintln!` panics when stderr is a closed pipe.
     crate::output::stderr(&format!(
-        "reconstruct: {} points, {} candidates, {} predicted real, {} faces kept ({} removed/refused), {} hole quads filled ({} new vertices) -> {}\n",
+        "reconstruct: {} points, {} candidates, {} predicted real, {} faces kept ({} removed/refused), {} floater faces removed, {} candidates rescued at holes, {} hole quads filled ({} new vertices), {} loops closed ({} quads, {} faces taken out) -> {}\n",
         rep.points,
         rep.candidates,
         rep.predicted,
         rep.faces,
         refused,
+        pp.floater_faces_removed,
+        pp.rescued,
         filled,
         rep.vertices_added,
+        pp.close.loops_closed,
+        pp.close.quads_added,
+        pp.close.faces_removed,
         out.display()
     ));
     if rep.faces == 0 {

@@ -24,7 +24,8 @@ pub struct CloseConfig {
     /// Longer loops are left open (borders of open surfaces; the dynamic programme costs
     /// O(n⁴) in the loop length).
     pub max_loop_edges: usize,
-    /// Minimum scaled Jacobian of each quad of a quadrangulation (0: no corner reflex).
+    /// Minimum scaled Jacobian of each quad of a quadrangulation (0 would let a corner
+    /// be straight: a triangle drawn as a quad).
     pub min_scaled_jacobian: f64,
     /// Minimum dot product of a quad's unit normal with the face across each loop edge
     /// it takes (folds are refused).
@@ -48,7 +49,7 @@ impl Default for CloseConfig {
         CloseConfig {
             enabled: true,
             max_loop_edges: 40,
-            min_scaled_jacobian: 0.0,
+            min_scaled_jacobian: 0.02,
             min_normal_dot: -0.3,
             min_loop_coherence: 0.5,
             min_loop_alignment: 0.5,

@@ -103,3 +103,49 @@ fn repair_drops_zero_area_quads_and_counts_them() {
     assert!(q.quads.iter().all(|f| !is_degenerate_quad(&f.map(|v| q.vertices[v as usize]))));
     validate(&HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).unwrap()).unwrap();
 }
+
+/// A wrong quad over the diagonal of two true ones leaves two triangle holes, which no
+/// quad can close on its own: `repair` pairs them through that quad and restores the
+/// true pair; `--no-close` leaves them open; a small separate part stays.
+#[test]
+fn repair_pairs_odd_holes_unless_told_not_to() {
+    let g = point2quad::mesh::shapes::grid(4, 3, 4.0, 3.0);
+    let id = |i: u32, j: u32| j * 5 + i;
+    let (a, b, c, d, e, f) = (id(1, 1), id(2, 1), id(3, 1), id(3, 2), id(2, 2), id(1, 2));
+    let key = |q: &[u32]| {
+        let mut k = q.to_vec();
+        k.sort_unstable();
+        k
+    };
+    let dropped = [key(&[a, b, e, f]), key(&[b, c, d, e])];
+    let mut poly = PolyMesh {
+        vertices: g.vertices.clone(),
+        faces: g.quads.iter().map(|q| q.to_vec()).filter(|q| !dropped.contains(&key(q))).collect(),
+    };
+    poly.faces.push(vec![a, b, d, e]);
+    // A lone quad elsewhere: repair keeps a user's small parts.
+    let n = poly.vertices.len() as u32;
+    poly.vertices.extend([[10.0, 0.0, 0.0], [11.0, 0.0, 0.0], [11.0, 1.0, 0.0], [10.0, 1.0, 0.0]]);
+    poly.faces.push(vec![n, n + 1, n + 2, n + 3]);
+    let input = tmp("diag.obj");
+    write_mesh(&input, &poly).unwrap();
+    let faces_of = |extra: &[&str]| {
+        let out = tmp("diag_out.obj");
+        let mut args = vec!["repair", input.to_str().unwrap(), "-o", out.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let r = bin().args(&args).output().unwrap();
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let q = read_mesh(&out).unwrap().to_quads().unwrap();
+        validate(&HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).unwrap()).unwrap();
+        let mut k: Vec<Vec<u32>> = q.quads.iter().map(|f| key(f)).collect();
+        k.sort();
+        k
+    };
+    let mut want: Vec<Vec<u32>> = g.quads.iter().map(|f| key(f)).collect();
+    want.push(vec![n, n + 1, n + 2, n + 3]);
+    want.sort();
+    assert_eq!(faces_of(&[]), want);
+    let open = faces_of(&["--no-close"]);
+    // The two true quads stay out, the diagonal one and the lone quad stay in.
+    assert!(open.contains(&key(&[a, b, d, e])) && open.len() == g.quads.len(), "{open:?}");
+}

@@ -424,3 +424,64 @@ fn reconstruct_closing_options() {
         assert!(!Path::new(&o).exists());
     }
 }
+
+/// `train --init`: a fine-tune starts from the given weights (their config, epoch 1 of
+/// its own count); a refined model's rounds are dropped with a message; combinations with
+/// --resume or --config are usage errors, a missing file a data error naming it.
+#[test]
+fn train_init_fine_tunes_from_weights() {
+    let s = Scratch::new("init");
+    let model = trained(&s);
+    let data = s.p("data");
+    let tuned = s.p("tuned.p2qm");
+    let base = ["train", "--data", &data, "--out", &tuned, "--epochs", "1", "--val-fraction", "0"];
+    let with =
+        |extra: &[&str]| -> Vec<String> { base.iter().chain(extra.iter()).map(|x| x.to_string()).collect() };
+    let args = with(&["--init", &model, "--max-candidates", "300", "--lr", "0.001"]);
+    let out = ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("epoch 1/1"));
+    let (a, b) = (
+        point2quad::pipeline::model::Model::load(Path::new(&model)).unwrap(),
+        point2quad::pipeline::model::Model::load(Path::new(&tuned)).unwrap(),
+    );
+    assert_eq!(a.config(), b.config());
+    // Trained further: some weight moved.
+    let moved = a.params.ids().any(|id| a.params.get(id) != b.params.get(id));
+    assert!(moved, "--init trained nothing");
+    // From a refined model: its rounds go.
+    let refined = s.p("r.p2qm");
+    ok(&[
+        "refine",
+        "--data",
+        &data,
+        "--model",
+        &model,
+        "--out",
+        &refined,
+        "--rounds",
+        "1",
+        "--widths",
+        "4",
+        "--epochs",
+        "1",
+        "--val-fraction",
+        "0.5",
+    ]);
+    let args = with(&["--init", &refined, "--max-candidates", "300"]);
+    let out = ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("refinement rounds are dropped"));
+    assert_eq!(
+        point2quad::pipeline::model::Model::load(Path::new(&tuned)).unwrap().config().refine_rounds,
+        0
+    );
+    for extra in [vec!["--init", &model, "--resume", "x.ckpt"], vec!["--init", &model, "--config", "default"]]
+    {
+        let args = with(&extra);
+        let err = fails(&args.iter().map(String::as_str).collect::<Vec<_>>(), 2);
+        assert!(err.contains("--init"), "{err}");
+    }
+    let missing = s.p("missing.p2qm");
+    let args = with(&["--init", &missing]);
+    let err = fails(&args.iter().map(String::as_str).collect::<Vec<_>>(), 1);
+    assert!(err.contains("missing.p2qm"), "{err}");
+}

@@ -35,6 +35,9 @@ OPTIONS:
                           (ignored with --resume: the checkpoint holds its config)
     --epochs N            total epochs, 1..100000 (a resumed run continues up to N) [40]
     --resume CKPT         continue exactly from a MODEL.ckpt written earlier
+    --init WEIGHTS        start from these weights (any weights file: its config is
+                          used, refinement rounds are dropped) with a fresh optimiser,
+                          learning-rate schedule and epoch count: a fine-tune
     --seed S              training seed [0]
     --lr X                initial learning rate [0.01]
     --val-fraction F      share of samples held out for validation [0.15]
@@ -61,6 +64,7 @@ const SPEC: Spec = Spec {
         "--config",
         "--epochs",
         "--resume",
+        "--init",
         "--seed",
         "--lr",
         "--val-fraction",
@@ -170,6 +174,12 @@ pub fn run(argv: &[String]) -> Result<()> {
         return Err(Error::Usage(format!("train: --lr must be a finite number > 0, got {}", cfg.sgd.lr)));
     }
     augmentation(&a, &mut cfg)?;
+    if a.value("--init").is_some() && (a.value("--resume").is_some() || a.value("--config").is_some()) {
+        return Err(Error::Usage(
+            "train: --init cannot be combined with --resume or --config (the weights file holds its config)"
+                .into(),
+        ));
+    }
     let ckpt_path = PathBuf::from(format!("{}.ckpt", out.display()));
     // Both files are first written after an epoch, which may be hours away; checked
     // even before the samples are read (a large dataset takes a while to load).
@@ -185,7 +195,22 @@ pub fn run(argv: &[String]) -> Result<()> {
             })?;
             (Model::from_checkpoint(&ck, Path::new(r))?, Some(state))
         }
-        None => (Model::new(ModelConfig::preset(a.value("--config").unwrap_or("default"))?, cfg.seed)?, None),
+        None => match a.value("--init") {
+            Some(w) => {
+                let m = Model::load(Path::new(w))?;
+                // The rounds were trained on this classifier's probabilities: stale after.
+                let m = if m.refiner().is_some() {
+                    say!("train: --init {w}: its refinement rounds are dropped (run `point2quad refine` after)");
+                    m.with_refinement(0, &[], 0)?
+                } else {
+                    m
+                };
+                (m, None)
+            }
+            None => {
+                (Model::new(ModelConfig::preset(a.value("--config").unwrap_or("default"))?, cfg.seed)?, None)
+            }
+        },
     };
 
     let t0 = std::time::Instant::now();

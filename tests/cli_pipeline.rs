@@ -330,6 +330,27 @@ fn reconstruct_bounds_k() {
     assert!(!Path::new(&s.p("o.obj")).exists(), "mesh left behind");
 }
 
+/// `refine` of `rounds` rounds of width 4, one epoch, on the tiny data.
+fn refine_tiny(data: &str, model: &str, out: &str, rounds: &str) -> Output {
+    ok(&[
+        "refine",
+        "--data",
+        data,
+        "--model",
+        model,
+        "--out",
+        out,
+        "--rounds",
+        rounds,
+        "--widths",
+        "4",
+        "--epochs",
+        "1",
+        "--val-fraction",
+        "0.5",
+    ])
+}
+
 /// `refine` end to end on the tiny data: the rounds train, the weights file is
 /// written, `reconstruct --model` reads it and gives a valid mesh; bad options and
 /// inputs are usage or data errors that write nothing.
@@ -339,23 +360,7 @@ fn refine_trains_rounds_that_reconstruct_reads() {
     let model = trained(&s);
     let data = s.p("data");
     let refined = s.p("r.p2qm");
-    let out = ok(&[
-        "refine",
-        "--data",
-        &data,
-        "--model",
-        &model,
-        "--out",
-        &refined,
-        "--rounds",
-        "2",
-        "--widths",
-        "4",
-        "--epochs",
-        "1",
-        "--val-fraction",
-        "0.5",
-    ]);
+    let out = refine_tiny(&data, &model, &refined, "2");
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("round 1:") && err.contains("round 2:") && err.contains("AP"), "{err}");
     let m = point2quad::pipeline::model::Model::load(Path::new(&refined)).unwrap();
@@ -450,23 +455,7 @@ fn train_init_fine_tunes_from_weights() {
     assert!(moved, "--init trained nothing");
     // From a refined model: its rounds go.
     let refined = s.p("r.p2qm");
-    ok(&[
-        "refine",
-        "--data",
-        &data,
-        "--model",
-        &model,
-        "--out",
-        &refined,
-        "--rounds",
-        "1",
-        "--widths",
-        "4",
-        "--epochs",
-        "1",
-        "--val-fraction",
-        "0.5",
-    ]);
+    refine_tiny(&data, &model, &refined, "1");
     let args = with(&["--init", &refined, "--max-candidates", "300"]);
     let out = ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(String::from_utf8_lossy(&out.stderr).contains("refinement rounds are dropped"));

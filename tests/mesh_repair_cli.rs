@@ -134,7 +134,10 @@ fn repair_pairs_odd_holes_unless_told_not_to() {
         let mut args = vec!["repair", input.to_str().unwrap(), "-o", out.to_str().unwrap()];
         args.extend_from_slice(extra);
         let r = bin().args(&args).output().unwrap();
-        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert!(r.status.success(), "{err}");
+        let closing = extra.is_empty();
+        assert_eq!(err.contains("closing: 1 loops closed with 2 quads, 1 faces taken out"), closing, "{err}");
         let q = read_mesh(&out).unwrap().to_quads().unwrap();
         validate(&HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).unwrap()).unwrap();
         let mut k: Vec<Vec<u32>> = q.quads.iter().map(|f| key(f)).collect();

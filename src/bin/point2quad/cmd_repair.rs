@@ -118,6 +118,15 @@ pub fn run(argv: &[String]) -> Result<()> {
             h.vertices_reused
         );
     }
+    if cfg.close.enabled {
+        say!(
+            "  closing: {} loops closed with {} quads, {} faces taken out to pair odd loops, {} refused faces put in at holes",
+            rep.close.loops_closed,
+            rep.close.quads_added,
+            rep.close.faces_removed,
+            rep.rescued
+        );
+    }
     say!("  components re-oriented (closed: outward; open: as most input faces): {}", rep.components_flipped);
     say!(
         "  output: {} vertices, {} quads, {} boundary loops",

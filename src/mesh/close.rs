@@ -3,8 +3,9 @@
 //!   quads: every quad patch has an even number of border edges. Odd loops come in pairs
 //!   (a quad mesh has an even number of border edges in all), and the common case is a
 //!   wrong quad over the diagonal of two true ones, which leaves a triangle on each side.
-//!   A face with an edge on two different odd loops is removed, which merges them into one
-//!   even loop; that loop is then quadrangulated. If it cannot be, the face is put back.
+//!   A path of at most `max_path_faces` faces from one odd loop to another is removed,
+//!   which merges them into one even loop; that loop is then quadrangulated. If it cannot
+//!   be, the faces are put back.
 //! - **Even loops by quadrangulation.** An even loop of at most `max_loop_edges` edges is
 //!   split into quads over its own vertices (no new vertex) by dynamic programming over
 //!   its chords, minimising Σ(1 − scaled Jacobian) under the hole filling's shape and fold
@@ -247,6 +248,13 @@ fn close_loop(mesh: &mut HalfedgeMesh, pos: &[[f64; 3]], start: HalfedgeId, cfg:
     added.len()
 }
 
+/// The loop of half-edge `h` in a table of [`loop_ids`], if it is a boundary half-edge
+/// (the table may be older than the mesh: half-edges added since have none).
+fn loop_of(mesh: &HalfedgeMesh, id: &[u32], h: HalfedgeId) -> Option<usize> {
+    let m = id.get(h.idx()).copied().unwrap_or(u32::MAX);
+    (m != u32::MAX && mesh.is_boundary(h)).then_some(m as usize)
+}
+
 /// Which loop each boundary half-edge is on (index into `loops`), by half-edge index.
 fn loop_ids(mesh: &HalfedgeMesh, loops: &[Vec<HalfedgeId>]) -> Vec<u32> {
     let mut id = vec![u32::MAX; mesh.halfedge_capacity()];
@@ -313,10 +321,7 @@ fn pair_odd_loops(mesh: &mut HalfedgeMesh, pos: &[[f64; 3]], cfg: &CloseConfig, 
                 let around: Vec<usize> = path
                     .iter()
                     .flat_map(|&f| mesh.face_halfedges(f))
-                    .filter(|g| mesh.is_boundary(g.opposite()))
-                    .map(|g| id.get(g.opposite().idx()).copied().unwrap_or(u32::MAX))
-                    .filter(|&m| m != u32::MAX)
-                    .map(|m| m as usize)
+                    .filter_map(|g| loop_of(mesh, &id, g.opposite()))
                     .collect();
                 if around.iter().any(|&m| touched[m]) {
                     continue;
@@ -386,11 +391,10 @@ fn face_paths(
     let mut paths = Vec::new();
     for depth in 1..=max_faces {
         for &f in &frontier {
-            let hits = mesh.face_halfedges(f).iter().any(|g| {
-                let o = g.opposite();
-                let m = id.get(o.idx()).copied().unwrap_or(u32::MAX);
-                m != u32::MAX && m as usize != l && mesh.is_boundary(o) && want(m as usize)
-            });
+            let hits = mesh
+                .face_halfedges(f)
+                .iter()
+                .any(|g| loop_of(mesh, id, g.opposite()).is_some_and(|m| m != l && want(m)));
             if hits {
                 let mut path = vec![f];
                 let mut c = f;

@@ -1,6 +1,7 @@
 //! The post-process (DESIGN §4): (a) the paper's score filter on the soup of predicted
 //! faces, (b) insertion into the half-edge mesh by probability, refusing whatever would
-//! break manifoldness, (c) greedy hole filling. The output is a pure-quad, consistently
+//! break manifoldness, (c) greedy hole filling, then (not in the paper) the rescue of
+//! candidates at holes and the closing of loops left open. The output is a pure-quad, consistently
 //! oriented manifold mesh by construction; its first vertices are the input positions.
 
 use std::cmp::Ordering;
@@ -318,9 +319,10 @@ pub fn orient_components(
 
 /// The whole post-process, after dropping faces that repeat a vertex or have no area
 /// ([`PostprocessReport::degenerate`], [`PostprocessReport::zero_area`]): (a) score filter,
-/// (b) manifold insertion by probability, removal of floaters and rescue of refused faces
-/// at holes, (c) hole filling, then [`orient_components`]. Same as
-/// [`postprocess_with_reserve`] with an empty reserve.
+/// (b) manifold insertion by probability and removal of floaters, (c) hole filling, the
+/// rescue of refused faces at holes, the closing of loops left open ([`close_holes`]),
+/// hole filling again where those changed the loops and floaters again, then
+/// [`orient_components`]. Same as [`postprocess_with_reserve`] with an empty reserve.
 ///
 /// # Errors
 /// As [`postprocess_with_reserve`].
@@ -397,7 +399,8 @@ pub fn postprocess_with_reserve(
             }
         }
         for (f, &p) in reserve.iter().zip(reserve_probs) {
-            if usable(f) {
+            // Most of the reserve is far below min_prob: skip it before the area test.
+            if p >= cfg.rescue.min_prob && usable(f) {
                 pool.push(all.len());
                 all.push(*f);
                 all_p.push(p);

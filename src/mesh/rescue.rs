@@ -1,5 +1,5 @@
-//! Two repairs between the manifold insertion and the hole filling (not in the paper;
-//! README "Deviations"):
+//! Two repairs of the post-process (not in the paper; README "Deviations"), run after the
+//! manifold insertion (floaters) and after the greedy hole filling (rescue):
 //! - [`remove_small_open_components`]: floaters — a lone quad or a small open patch away
 //!   from the surface — are almost always wrong faces (a quad over noise points, or a
 //!   wrong quad that lost every neighbour to a likelier rival); they add four or more
@@ -119,10 +119,10 @@ pub fn rescue_faces(
     }
     let mut used = vec![false; faces.len()];
     let mut stamp = vec![0u32; faces.len()];
-    // Boundary edges of the quad: `None` when an edge already has two faces (it cannot
-    // go in), else how many of its edges exist with one face.
-    // Also `None` when two of those edges belong to one face: the quad would share three
-    // corners with it and fold over it (at a convex corner of a border).
+    // Boundary edges of the quad: how many of its edges exist with one face; `None` when
+    // an edge already has two faces (it cannot go in) or when two of those edges belong
+    // to one face (the quad would share three corners with it and fold over it, at a
+    // convex corner of a border).
     let glued = |mesh: &HalfedgeMesh, f: &[u32; 4]| -> Option<usize> {
         let mut across: [Option<FaceId>; 4] = [None; 4];
         let mut g = 0;

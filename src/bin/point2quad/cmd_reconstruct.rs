@@ -131,12 +131,9 @@ pub fn run(argv: &[String]) -> Result<()> {
         .chain(std::iter::once(("write", t_write)))
         .map(|(n, s)| format!("{n} {:.0} ms", s * 1e3))
         .collect();
-    let (filled, refused) = rep
-        .postprocess
-        .as_ref()
-        .map(|p| (p.hole_fill.quads_added(), p.refused_on_insertion + p.removed_by_score))
-        .unwrap_or((0, 0));
+    // All zero under --no-postprocess.
     let pp = rep.postprocess.clone().unwrap_or_default();
+    let (filled, refused) = (pp.hole_fill.quads_added(), pp.refused_on_insertion + pp.removed_by_score);
     // Through `output::stderr`: `eprintln!` panics when stderr is a closed pipe.
     crate::output::stderr(&format!(
         "reconstruct: {} points, {} candidates, {} predicted real, {} faces kept ({} removed/refused), {} floater faces removed, {} candidates rescued at holes, {} hole quads filled ({} new vertices), {} loops closed ({} quads, {} faces taken out) -> {}\n",

@@ -226,3 +226,194 @@ fn random_shape_is_deterministic_and_covers_elongated_quads() {
     }
     assert!(min_ratio < 0.4, "no elongated quads: min edge ratio {min_ratio}");
 }
+
+/// Brute-force reference for the shape modifiers: per vertex, the sum of its quads'
+/// diagonal cross products (p2 − p0) × (p3 − p1) and its shortest incident edge; and the
+/// mean edge length over all quad sides.
+fn reference_vertex_frames(m: &QuadMesh) -> (Vec<[f64; 3]>, Vec<f64>, f64) {
+    let n = m.vertices.len();
+    let mut shortest = vec![f64::INFINITY; n];
+    let mut normal = vec![[0.0f64; 3]; n];
+    let (mut total, mut count) = (0.0, 0.0);
+    for q in &m.quads {
+        let p = q.map(|i| m.vertices[i as usize]);
+        let d1 = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
+        let d2 = [p[3][0] - p[1][0], p[3][1] - p[1][1], p[3][2] - p[1][2]];
+        let c = [d1[1] * d2[2] - d1[2] * d2[1], d1[2] * d2[0] - d1[0] * d2[2], d1[0] * d2[1] - d1[1] * d2[0]];
+        for k in 0..4 {
+            let (a, b) = (p[k], p[(k + 1) % 4]);
+            let l = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
+            let (v, w) = (q[k] as usize, q[(k + 1) % 4] as usize);
+            shortest[v] = shortest[v].min(l);
+            shortest[w] = shortest[w].min(l);
+            for a in 0..3 {
+                normal[v][a] += c[a];
+            }
+            total += l;
+            count += 1.0;
+        }
+    }
+    (normal, shortest, total / count)
+}
+
+/// Scaled Jacobian of face `f` of `m` (the metric code's definition).
+fn face_sj(m: &QuadMesh, f: usize) -> f64 {
+    let q = m.quads[f];
+    point2quad::mesh::quality::quad_shape(&q.map(|i| m.vertices[i as usize])).scaled_jacobian
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(32))]
+
+    /// `irregularize` against its contract, checked independently: connectivity kept,
+    /// every move tangential and within amount × the vertex's shortest original edge,
+    /// no face below min(min_sj, its original scaled Jacobian), and still a valid mesh.
+    #[test]
+    fn irregularize_keeps_connectivity_and_shape_bounds(seed in 0u64..1_000_000, amount in 0.0f64..0.5, min_sj in 0.2f64..0.8) {
+        let mut rng = Rng::new(seed);
+        let m = shapes::random_shape(&mut rng);
+        let before = check_quad_mesh(&m);
+        let j = shapes::irregularize(&m, amount, min_sj, &mut rng);
+        prop_assert_eq!(&j.quads, &m.quads);
+        prop_assert_eq!(j.vertices.len(), m.vertices.len());
+        let after = check_quad_mesh(&j);
+        prop_assert_eq!((after.euler(), after.boundary_edges, after.components), (before.euler(), before.boundary_edges, before.components));
+        let (normal, shortest, _) = reference_vertex_frames(&m);
+        let n = m.vertices.len();
+        for v in 0..n {
+            let d: Vec<f64> = (0..3).map(|a| j.vertices[v][a] - m.vertices[v][a]).collect();
+            let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            prop_assert!(len <= amount * shortest[v] * (1.0 + 1e-9) + 1e-12, "vertex {v} moved {len}, bound {}", amount * shortest[v]);
+            let nl = (normal[v][0].powi(2) + normal[v][1].powi(2) + normal[v][2].powi(2)).sqrt();
+            if nl > 0.0 && len > 0.0 {
+                let along = (d[0] * normal[v][0] + d[1] * normal[v][1] + d[2] * normal[v][2]) / nl;
+                prop_assert!(along.abs() <= 1e-9 * len.max(shortest[v]), "vertex {v}: {along} along the normal");
+            }
+        }
+        for f in 0..m.quads.len() {
+            let (s0, s1) = (face_sj(&m, f), face_sj(&j, f));
+            prop_assert!(s1 >= min_sj.min(s0) - 1e-12, "face {f}: scaled Jacobian {s0} -> {s1} (bound {min_sj})");
+        }
+    }
+}
+
+#[test]
+fn irregularize_makes_faces_irregular_and_zero_amount_is_identity() {
+    let g = shapes::grid(20, 20, 1.0, 1.0);
+    let mut rng = Rng::new(5);
+    assert_eq!(shapes::irregularize(&g, 0.0, 0.5, &mut rng).vertices, g.vertices);
+    let j = shapes::irregularize(&g, 0.3, 0.5, &mut rng);
+    let mean = |m: &QuadMesh| (0..m.quads.len()).map(|f| face_sj(m, f)).sum::<f64>() / m.quads.len() as f64;
+    // A square grid has SJ 1 everywhere; moves of up to 30% of an edge must show.
+    assert!((mean(&g) - 1.0).abs() < 1e-12);
+    let (mj, lo) = (mean(&j), (0..j.quads.len()).map(|f| face_sj(&j, f)).fold(1.0, f64::min));
+    assert!(mj < 0.97 && lo >= 0.5, "mean SJ {mj}, min {lo}");
+    // Deterministic for a seed.
+    assert_eq!(
+        shapes::irregularize(&g, 0.3, 0.5, &mut Rng::new(9)).vertices,
+        shapes::irregularize(&g, 0.3, 0.5, &mut Rng::new(9)).vertices
+    );
+}
+
+/// Largest angle (degrees) between the diagonal normals of two faces sharing an edge,
+/// and the mean over shared edges (brute force over face pairs).
+fn dihedral_stats(m: &QuadMesh) -> f64 {
+    let normal = |q: &[u32; 4]| {
+        let p = q.map(|i| m.vertices[i as usize]);
+        let d1 = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
+        let d2 = [p[3][0] - p[1][0], p[3][1] - p[1][1], p[3][2] - p[1][2]];
+        let c = [d1[1] * d2[2] - d1[2] * d2[1], d1[2] * d2[0] - d1[0] * d2[2], d1[0] * d2[1] - d1[1] * d2[0]];
+        let l = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+        [c[0] / l, c[1] / l, c[2] / l]
+    };
+    let mut edges: std::collections::HashMap<(u32, u32), Vec<usize>> = Default::default();
+    for (f, q) in m.quads.iter().enumerate() {
+        for k in 0..4 {
+            let (a, b) = (q[k], q[(k + 1) % 4]);
+            edges.entry((a.min(b), a.max(b))).or_default().push(f);
+        }
+    }
+    let (mut sum, mut n) = (0.0, 0usize);
+    for fs in edges.values().filter(|fs| fs.len() == 2) {
+        let (a, b) = (normal(&m.quads[fs[0]]), normal(&m.quads[fs[1]]));
+        sum += (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).clamp(-1.0, 1.0).acos().to_degrees();
+        n += 1;
+    }
+    sum / n.max(1) as f64
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// `add_bumps` against its contract: connectivity kept, every vertex moved along its
+    /// own normal (brute-force reference) by at most √waves × amplitude mean edges, and
+    /// no face below min(min_sj, its scaled Jacobian before).
+    #[test]
+    fn add_bumps_moves_along_normals_within_bounds(seed in 0u64..1_000_000, waves in 1usize..5, amplitude in 0.0f64..1.5, min_sj in 0.1f64..0.6) {
+        let mut rng = Rng::new(seed);
+        let m = shapes::random_shape(&mut rng);
+        let b = shapes::add_bumps(&m, waves, (3.0, 8.0), amplitude, min_sj, &mut rng);
+        prop_assert_eq!(&b.quads, &m.quads);
+        let (normal, _, mean_edge) = reference_vertex_frames(&m);
+        let bound = (waves as f64).sqrt() * amplitude * mean_edge;
+        for (v, nv) in normal.iter().enumerate() {
+            let d: Vec<f64> = (0..3).map(|a| b.vertices[v][a] - m.vertices[v][a]).collect();
+            let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            prop_assert!(len <= bound * (1.0 + 1e-9) + 1e-12, "vertex {v} moved {len} > {bound}");
+            let nl = (nv[0].powi(2) + nv[1].powi(2) + nv[2].powi(2)).sqrt();
+            // Parallel to the normal: the cross product vanishes.
+            let cr = [d[1] * nv[2] - d[2] * nv[1], d[2] * nv[0] - d[0] * nv[2], d[0] * nv[1] - d[1] * nv[0]];
+            let off = (cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]).sqrt() / nl.max(1e-300);
+            prop_assert!(off <= 1e-9 * bound.max(1e-300) + 1e-12, "vertex {v}: {off} off its normal");
+        }
+        for f in 0..m.quads.len() {
+            let (s0, s1) = (face_sj(&m, f), face_sj(&b, f));
+            prop_assert!(s1 >= min_sj.min(s0) - 1e-12, "face {f}: {s0} -> {s1}");
+        }
+    }
+}
+
+#[test]
+fn add_bumps_bends_a_sphere_between_neighbouring_faces() {
+    let s = shapes::cube_sphere(12);
+    let before = dihedral_stats(&s);
+    // 12 × 12 per side: neighbouring faces ~7° apart; waves a few edges long, up to an
+    // edge high, must bend every draw further (a do-nothing or a halved-to-nothing
+    // displacement fails).
+    assert!(before < 9.0, "{before}");
+    for seed in 0..8 {
+        let b = shapes::add_bumps(&s, 3, (3.0, 6.0), 1.0, 0.2, &mut Rng::new(seed));
+        let after = dihedral_stats(&b);
+        assert!(after > before + 0.5, "seed {seed}: mean dihedral {before:.1}° -> {after:.1}°");
+    }
+    assert_eq!(shapes::add_bumps(&s, 2, (3.0, 6.0), 0.0, 0.2, &mut Rng::new(4)).vertices, s.vertices);
+}
+
+/// `dataset --bumpy`: the same shapes (names, connectivity) bent more between
+/// neighbouring faces for most samples; without it, exactly the unbumped recipe
+/// (family then shape from the sample's stream), so the shipped weights' data is unchanged.
+#[test]
+fn bumpy_synthetic_samples_bend_more_and_plain_ones_are_unchanged() {
+    use point2quad::pipeline::dataset::{sample_rng, synthetic_mesh};
+    let mut bent = 0;
+    for i in 0..12 {
+        let (name, plain, _) = synthetic_mesh(7, i, false);
+        let mut rng = sample_rng(7, i);
+        let family = Family::ALL[rng.below(Family::ALL.len())];
+        let reference = shapes::random_shape_of(family, &mut rng);
+        assert_eq!(
+            (plain.vertices.clone(), plain.quads.clone()),
+            (reference.vertices, reference.quads),
+            "{name}"
+        );
+        let (bname, bumpy, _) = synthetic_mesh(7, i, true);
+        assert_eq!((&bname, &bumpy.quads), (&name, &plain.quads));
+        if bumpy.vertices != plain.vertices {
+            let (d0, d1) = (dihedral_stats(&plain), dihedral_stats(&bumpy));
+            assert!(d1 > d0, "{name}: mean dihedral {d0:.1}° -> {d1:.1}°");
+            bent += 1;
+        }
+    }
+    // Three in four on average: at least half of 12.
+    assert!(bent >= 6, "only {bent} of 12 bumpy");
+}

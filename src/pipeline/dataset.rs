@@ -408,13 +408,33 @@ pub fn sample_rng(seed: u64, index: usize) -> Rng {
     Rng::new(seed).fork(index as u64)
 }
 
+/// Smallest scaled Jacobian a face of a bumpy synthetic shape may fall to (faces already
+/// below it may only not get worse); see [`shapes::add_bumps`].
+pub const BUMP_MIN_SJ: f64 = 0.5;
+/// Wavelengths of the bumps, in mean edge lengths.
+pub const BUMP_WAVELENGTH: (f64, f64) = (3.0, 8.0);
+/// Range of the bumps' amplitude parameter, in mean edge lengths.
+pub const BUMP_AMPLITUDE: (f64, f64) = (0.5, 1.8);
+
 /// Synthetic sample `index` of a dataset made with `seed`: a name
 /// (`syn_<index>_<family>`) and a random shape from [`shapes::random_shape_of`], drawn
 /// from the start of [`sample_rng`]`(seed, index)`, which is returned for the noise.
-pub fn synthetic_mesh(seed: u64, index: usize) -> (String, QuadMesh, Rng) {
+///
+/// With `bumpy` (`dataset --bumpy`; session 7's experiment, not in the shipped recipe),
+/// three shapes in four are then made bumpy ([`shapes::add_bumps`]: 1–4 plane waves of
+/// [`BUMP_WAVELENGTH`] mean edges, amplitude parameter in [`BUMP_AMPLITUDE`]). The
+/// parametric families bend by 2–9° between neighbouring faces on average, coarse meshes
+/// of organic shapes by 17–31°; the bumpy shapes by up to ~30°. Without it, the stream
+/// and the shapes are exactly those of earlier versions (the shipped weights' data).
+pub fn synthetic_mesh(seed: u64, index: usize, bumpy: bool) -> (String, QuadMesh, Rng) {
     let mut rng = sample_rng(seed, index);
     let family = Family::ALL[rng.below(Family::ALL.len())];
-    let mesh = shapes::random_shape_of(family, &mut rng);
+    let mut mesh = shapes::random_shape_of(family, &mut rng);
+    if bumpy && rng.below(4) != 3 {
+        let waves = 1 + rng.below(4);
+        let amplitude = rng.uniform(BUMP_AMPLITUDE.0, BUMP_AMPLITUDE.1);
+        mesh = shapes::add_bumps(&mesh, waves, BUMP_WAVELENGTH, amplitude, BUMP_MIN_SJ, &mut rng);
+    }
     (format!("syn_{index:05}_{}", family.name()), mesh, rng)
 }
 

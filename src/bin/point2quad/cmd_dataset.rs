@@ -27,6 +27,9 @@ OPTIONS:
                       and index.txt (file, points, candidates, positives, coverage)
     --synthetic N     N random synthetic quad meshes (all shape families, random pose;
                       at most 100000)
+    --bumpy           make three synthetic shapes in four bumpy: they then bend by up
+                      to ~30 degrees between neighbouring faces, as coarse organic
+                      meshes do (an experiment: not in the shipped weights' recipe)
     --meshes DIR      every .obj/.off/.ply file directly in DIR (sorted by name)
     --noise F         noise points per mesh vertex (default 0.1; at most 100)
     --offset F        largest noise offset along the face normal, as a fraction of
@@ -61,9 +64,10 @@ pub fn run(argv: &[String]) -> Result<()> {
     const CMD: &str = "dataset";
     let spec = Spec {
         valued: &["--out", "--synthetic", "--meshes", "--noise", "--offset", "--seed"],
-        switches: &[],
+        switches: &["--bumpy"],
     };
     let args = Args::parse(CMD, argv, &spec)?;
+    let bumpy = args.switch("--bumpy");
     if !args.positional.is_empty() {
         return Err(Error::Usage(format!(
             "{CMD}: unexpected argument {:?} (see `point2quad {CMD} --help`)",
@@ -124,7 +128,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let done = AtomicUsize::new(0);
     let results: Vec<Result<Option<String>>> = par::map(total, |k| {
         let (name, mesh, mut rng) = match &jobs[k] {
-            Job::Synthetic(i) => synthetic_mesh(seed, *i),
+            Job::Synthetic(i) => synthetic_mesh(seed, *i, bumpy),
             Job::File(path, name) => match load_quads(path) {
                 Ok(mesh) => (name.clone(), mesh, sample_rng(seed, k)),
                 Err(msg) => {

@@ -2,7 +2,7 @@
 //! the classifier's own probabilities over a dataset (the classifier stays frozen).
 
 use crate::args::{Args, Spec};
-use crate::cmd_train::{is_validation, load_dir};
+use crate::cmd_train::{load_dir, Split};
 use crate::output::say;
 use point2quad::nn::checkpoint;
 use point2quad::pipeline::model::{Model, MAX_REFINE_ROUNDS};
@@ -23,7 +23,7 @@ probability and those of its rivals and neighbours (the best other candidate on
 each directed edge, across each edge, over its diagonals, the probability mass at
 its corners) and gives a new probability. BASE's classifier (and point encoder) is
 copied unchanged; rounds BASE already had are replaced. The validation split is
-train's (same hash of the sample name, same --val-fraction), so use the dataset
+train's (same hash of the sample name, same --val-fraction and --hold-out), so use the dataset
 BASE was trained on. MODEL is written atomically at the end (a run takes minutes).
 
 OPTIONS:
@@ -37,6 +37,7 @@ OPTIONS:
     --lr X                initial learning rate (x0.1 over a round) [0.1]
     --seed S              initialisation and shuffling seed [0]
     --val-fraction F      share of samples held out for validation [0.15]
+    --hold-out A,B,...    also hold out the samples with these names (as train)
 ";
 
 const SPEC: Spec = Spec {
@@ -51,6 +52,7 @@ const SPEC: Spec = Spec {
         "--lr",
         "--seed",
         "--val-fraction",
+        "--hold-out",
     ],
     switches: &[],
 };
@@ -89,10 +91,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         return Err(Error::Usage(format!("refine: --lr must be a finite number > 0, got {}", cfg.sgd.lr)));
     }
     cfg.seed = a.parsed(cmd, "--seed", 0u64)?;
-    let val_fraction: f64 = a.parsed(cmd, "--val-fraction", 0.15)?;
-    if !(0.0..1.0).contains(&val_fraction) {
-        return Err(Error::Usage(format!("refine: --val-fraction must be in [0, 1), got {val_fraction}")));
-    }
+    let split = Split::from_args(cmd, &a)?;
     crate::output::check_output_path(&out)?;
     let base = Model::load(&base_path)?;
     let mut model = base.with_refinement(rounds, &widths, cfg.seed)?;
@@ -100,6 +99,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let t0 = std::time::Instant::now();
     let samples = load_dir(&data)?;
     check_samples(&samples, &base)?;
+    split.check_names(cmd, samples.iter().map(|s| s.name.as_str()))?;
     let fin = base.config().face_in();
     let n_samples = samples.len();
     let (mut tr, mut va) = (Vec::new(), Vec::new());
@@ -108,7 +108,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         let p = base
             .predict_base(&s.points, &s.candidates, &x)
             .map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))?;
-        let validation = is_validation(&s.name, val_fraction);
+        let validation = split.is_validation(&s.name);
         let rs = RefineSample {
             n_points: s.points.len(),
             name: s.name,

@@ -41,6 +41,8 @@ OPTIONS:
     --seed S              training seed [0]
     --lr X                initial learning rate [0.01]
     --val-fraction F      share of samples held out for validation [0.15]
+    --hold-out A,B,...    also hold out the samples with these names (e.g. whole
+                          meshes: qm_monkey,qm_feline); each must exist in DIR
     --max-candidates M    candidates drawn per step [12000]
 
 AUGMENTATION (per step, from the training RNG; not stored in checkpoints, so give
@@ -68,6 +70,7 @@ const SPEC: Spec = Spec {
         "--seed",
         "--lr",
         "--val-fraction",
+        "--hold-out",
         "--max-candidates",
         "--scale",
         "--jitter",
@@ -77,6 +80,59 @@ const SPEC: Spec = Spec {
 
 fn fnv(s: &str) -> u64 {
     s.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
+}
+
+/// The validation split shared by `train` and `refine`: a sample is held out when a hash
+/// of its name falls under `fraction` (the same split on every run) or when its name is
+/// one of `names` (`--hold-out`: whole meshes kept out of training to judge on).
+#[derive(Clone, Debug)]
+pub(crate) struct Split {
+    pub fraction: f64,
+    pub names: Vec<String>,
+}
+
+impl Split {
+    /// `--val-fraction` and `--hold-out` of `a`, checked; `cmd` names the command in errors.
+    pub(crate) fn from_args(cmd: &str, a: &Args) -> Result<Split> {
+        let fraction: f64 = a.parsed(cmd, "--val-fraction", 0.15)?;
+        if !(0.0..1.0).contains(&fraction) {
+            return Err(Error::Usage(format!("{cmd}: --val-fraction must be in [0, 1), got {fraction}")));
+        }
+        let mut names = Vec::new();
+        if let Some(v) = a.value("--hold-out") {
+            for n in v.split(',') {
+                let n = n.trim();
+                if n.is_empty() {
+                    return Err(Error::Usage(format!(
+                        "{cmd}: --hold-out takes sample names separated by commas, got '{v}'"
+                    )));
+                }
+                names.push(n.to_string());
+            }
+        }
+        Ok(Split { fraction, names })
+    }
+
+    /// Whether the sample called `name` is in the validation part.
+    pub(crate) fn is_validation(&self, name: &str) -> bool {
+        self.names.iter().any(|n| n == name) || is_validation(name, self.fraction)
+    }
+
+    /// Error naming the `--hold-out` names that no sample of `samples` carries (a typo
+    /// would otherwise silently train on the mesh meant to be held out).
+    pub(crate) fn check_names<'a>(&self, cmd: &str, samples: impl Iterator<Item = &'a str>) -> Result<()> {
+        let have: std::collections::HashSet<&str> = samples.collect();
+        let missing: Vec<&str> =
+            self.names.iter().map(|s| s.as_str()).filter(|n| !have.contains(n)).collect();
+        if missing.is_empty() {
+            Ok(())
+        } else {
+            Err(Error::Usage(format!(
+                "{cmd}: --hold-out names no sample of the dataset: {}",
+                missing.join(", ")
+            )))
+        }
+    }
 }
 
 /// Whether the sample called `name` is in the validation part: by a hash of the name,
@@ -162,11 +218,8 @@ pub fn run(argv: &[String]) -> Result<()> {
     cfg.seed = a.parsed(cmd, "--seed", 0u64)?;
     cfg.sgd.lr = a.parsed(cmd, "--lr", cfg.sgd.lr)?;
     cfg.max_candidates = a.parsed(cmd, "--max-candidates", cfg.max_candidates)?;
-    let val_fraction: f64 = a.parsed(cmd, "--val-fraction", 0.15)?;
     // One message per option, naming it and the value given.
-    if !(0.0..1.0).contains(&val_fraction) {
-        return Err(Error::Usage(format!("train: --val-fraction must be in [0, 1), got {val_fraction}")));
-    }
+    let split = Split::from_args(cmd, &a)?;
     if cfg.max_candidates == 0 {
         return Err(Error::Usage("train: --max-candidates must be positive, got 0".into()));
     }
@@ -215,9 +268,10 @@ pub fn run(argv: &[String]) -> Result<()> {
 
     let t0 = std::time::Instant::now();
     let samples = load_dir(&data)?;
+    split.check_names(cmd, samples.iter().map(|s| s.name.as_str()))?;
     let (mut tr, mut va): (Vec<Sample>, Vec<Sample>) = (Vec::new(), Vec::new());
     for s in samples {
-        if is_validation(&s.name, val_fraction) {
+        if split.is_validation(&s.name) {
             va.push(s);
         } else {
             tr.push(s);

@@ -42,7 +42,9 @@ OPTIONS:
     --lr X                initial learning rate [0.01]
     --val-fraction F      share of samples held out for validation [0.15]
     --hold-out A,B,...    also hold out the samples with these names (e.g. whole
-                          meshes: qm_monkey,qm_feline); each must exist in DIR
+                          meshes: qm_monkey,qm_feline); each must exist in DIR. The
+                          split is not stored in checkpoints: give the same
+                          --val-fraction and --hold-out when resuming
     --max-candidates M    candidates drawn per step [12000]
 
 AUGMENTATION (per step, from the training RNG; not stored in checkpoints, so give

@@ -827,6 +827,25 @@ pub fn random_shape_of(family: Family, rng: &mut Rng) -> QuadMesh {
     random_pose(&m, rng)
 }
 
+/// Per vertex, the sum of its quads' diagonal cross products (p2 − p0) × (p3 − p1): an
+/// area-weighted normal, zero for a vertex without faces.
+fn vertex_normal_sums(mesh: &QuadMesh) -> Vec<[f64; 3]> {
+    let mut normal = vec![[0.0f64; 3]; mesh.vertices.len()];
+    for q in &mesh.quads {
+        let p = q.map(|i| mesh.vertices[i as usize]);
+        let c = cross(sub(p[2], p[0]), sub(p[3], p[1]));
+        for &v in q {
+            normal[v as usize] = add(normal[v as usize], c);
+        }
+    }
+    normal
+}
+
+/// Scaled Jacobian of quad `q` over `verts` (the metric code's definition).
+fn quad_sj(verts: &[[f64; 3]], q: &[u32; 4]) -> f64 {
+    crate::mesh::quality::quad_shape(&q.map(|i| verts[i as usize])).scaled_jacobian
+}
+
 /// An irregular copy of `mesh`: every vertex, in index order, moves within its tangent
 /// plane (normal: the sum of its quads' diagonal cross products) by a random offset drawn
 /// uniformly from the disk of radius `amount` × its shortest incident edge (as it was
@@ -837,31 +856,26 @@ pub fn random_shape_of(family: Family, rng: &mut Rng) -> QuadMesh {
 ///
 /// Real quad meshes of organic shapes (remeshed scans) have faces with scaled Jacobians
 /// of 0.8–0.95 and uneven corners, where the parametric families are nearly square. (As
-/// training data it did not pay: session 7 measured it in the README's "Training recipe";
-/// the shipped recipe uses [`add_bumps`] instead. It stays as a test-shape utility.)
+/// training data it did not pay: session 7 measured it in the README's "Training recipe".
+/// It stays as a test-shape utility.)
 /// Two draws from `rng` per vertex whatever is kept, so the stream does not depend on
 /// the geometry. Vertices without a face or a tangent plane stay.
 pub fn irregularize(mesh: &QuadMesh, amount: f64, min_sj: f64, rng: &mut Rng) -> QuadMesh {
     let n = mesh.vertices.len();
+    let normal = vertex_normal_sums(mesh);
     let mut incident: Vec<Vec<usize>> = vec![Vec::new(); n];
     let mut shortest = vec![f64::INFINITY; n];
-    let mut normal = vec![[0.0f64; 3]; n];
     for (f, q) in mesh.quads.iter().enumerate() {
         let p = q.map(|i| mesh.vertices[i as usize]);
-        let c = cross(sub(p[2], p[0]), sub(p[3], p[1]));
         for k in 0..4 {
             let (a, b) = (q[k] as usize, q[(k + 1) % 4] as usize);
             let l = norm(sub(p[(k + 1) % 4], p[k]));
             shortest[a] = shortest[a].min(l);
             shortest[b] = shortest[b].min(l);
             incident[a].push(f);
-            normal[a] = add(normal[a], c);
         }
     }
-    let sj_of = |verts: &[[f64; 3]], f: usize| {
-        let q = mesh.quads[f];
-        crate::mesh::quality::quad_shape(&q.map(|i| verts[i as usize])).scaled_jacobian
-    };
+    let sj_of = |verts: &[[f64; 3]], f: usize| quad_sj(verts, &mesh.quads[f]);
     let mut out = mesh.clone();
     for v in 0..n {
         let (angle, radius) = (rng.uniform(0.0, std::f64::consts::TAU), rng.f64().sqrt());
@@ -902,14 +916,11 @@ pub fn add_bumps(
     min_sj: f64,
     rng: &mut Rng,
 ) -> QuadMesh {
-    let n = mesh.vertices.len();
-    let mut normal = vec![[0.0f64; 3]; n];
+    let normal = vertex_normal_sums(mesh);
     let (mut total, mut count) = (0.0f64, 0usize);
     for q in &mesh.quads {
         let p = q.map(|i| mesh.vertices[i as usize]);
-        let c = cross(sub(p[2], p[0]), sub(p[3], p[1]));
         for k in 0..4 {
-            normal[q[k] as usize] = add(normal[q[k] as usize], c);
             total += norm(sub(p[(k + 1) % 4], p[k]));
             count += 1;
         }
@@ -925,10 +936,7 @@ pub fn add_bumps(
             (scale(r[0], k), rng.uniform(0.0, std::f64::consts::TAU), a)
         })
         .collect();
-    let sj = |verts: &[[f64; 3]], q: &[u32; 4]| {
-        crate::mesh::quality::quad_shape(&q.map(|i| verts[i as usize])).scaled_jacobian
-    };
-    let before: Vec<f64> = mesh.quads.iter().map(|q| sj(&mesh.vertices, q)).collect();
+    let before: Vec<f64> = mesh.quads.iter().map(|q| quad_sj(&mesh.vertices, q)).collect();
     let mut factor = 1.0;
     for _ in 0..6 {
         let mut out = mesh.clone();
@@ -937,7 +945,7 @@ pub fn add_bumps(
             let h: f64 = params.iter().map(|(w, phi, a)| a * (dot(*w, *p) + phi).sin()).sum();
             *p = add(*p, scale(nv, factor * h));
         }
-        if out.quads.iter().zip(&before).all(|(q, &s0)| sj(&out.vertices, q) >= min_sj.min(s0)) {
+        if out.quads.iter().zip(&before).all(|(q, &s0)| quad_sj(&out.vertices, q) >= min_sj.min(s0)) {
             return out;
         }
         factor *= 0.5;

@@ -10,6 +10,8 @@
 //! FNORM=0 FVAR=1 FK=64 FV=12 FT=30 cargo run --release --example coverage_diagnostics -- far
 //! DM=qm_armadillo [DN=1] cargo run --release --example coverage_diagnostics -- ranks
 //! [DM=name] cargo run --release --example coverage_diagnostics -- normals
+//! [DM=name] cargo run --release --example coverage_diagnostics -- seams
+//! [DM=name] cargo run --release --example coverage_diagnostics -- agreement
 //! ```
 //!
 //! `sweep` reads CandidateConfig overrides from DK, DPP, DR, DS, DWI1, DWI, DWL, DWS,
@@ -27,7 +29,11 @@
 //! a ∈ kNN(p), b diverse of p, x ∈ kNN(b); FVAR=2: all four edges in kNN ∪ diverse).
 //! `ranks` prints the proposer rank, score and inside count of the true faces the
 //! default budget drops. `normals` counts PCA normals more than 45° off the ground
-//! truth, and the missed faces that touch one.
+//! truth (and, of the others, those whose sign is wrong, and the ground-truth edges
+//! between a right and a wrong sign: orientation seams), and the missed faces that
+//! touch one. `seams` counts pairs of adjacent true faces whose candidates run their
+//! shared edge the same way, and how many the normals rule of the refinement reads
+//! right. `agreement`: the true candidates with a corner normal against the face.
 
 #[path = "../tests/common/candidates.rs"]
 mod cands_common;
@@ -551,6 +557,29 @@ fn normals_check() {
             })
             .collect();
         let nb = bad.iter().filter(|&&b| b).count();
+        // Signed: well-aligned normals (|cos| ≥ 0.707) that point the wrong way.
+        let flipped: Vec<bool> = (0..pts.len())
+            .map(|i| {
+                let g = [pts[i][0] + gn[i][0], pts[i][1] + gn[i][1], pts[i][2] + gn[i][2]];
+                let gl = frame.to_local_all(&[g, pts[i]]);
+                let d: Vec<f64> = (0..3).map(|a| (gl[0][a] - gl[1][a]) as f64).collect();
+                let n = c.normals[i];
+                !bad[i] && (d[0] * n[0] as f64 + d[1] * n[1] as f64 + d[2] * n[2] as f64) < 0.0
+            })
+            .collect();
+        let nf = flipped.iter().filter(|&&b| b).count();
+        // Orientation seams: GT edges between two well-aligned normals of which exactly one is flipped.
+        let (mut seams, mut edges) = (0usize, 0usize);
+        for f in &mesh.quads {
+            for e in 0..4 {
+                let (u, v) = (f[e] as usize, f[(e + 1) % 4] as usize);
+                if !bad[u] && !bad[v] {
+                    edges += 1;
+                    seams += (flipped[u] != flipped[v]) as usize;
+                }
+            }
+        }
+        let nf_seam = seams as f64 / edges.max(1) as f64;
         let (mut missed, mut missed_bad) = (0, 0);
         for f in &mesh.quads {
             if !have.contains(&key(f)) {
@@ -559,12 +588,120 @@ fn normals_check() {
             }
         }
         println!(
-            "{:28} points {} bad normals {:.4} | missed faces {} of which with a bad-normal corner {}",
+            "{:28} points {} bad normals {:.4} flipped {:.4} seam-edges {:.4} | missed faces {} of which with a bad-normal corner {}",
             path.file_stem().unwrap().to_string_lossy(),
             pts.len(),
             nb as f64 / pts.len() as f64,
+            nf as f64 / pts.len() as f64,
+            nf_seam,
             missed,
             missed_bad
+        );
+    }
+}
+
+/// Orientation seams among candidates: pairs of ground-truth faces sharing an edge,
+/// both candidates, whose candidate orders run the shared edge the same way (a
+/// consistently oriented pair runs it both ways), and how many of those a comparison
+/// of the two candidates' own normals (|n_c·n_d| ≥ 0.5) would read correctly.
+fn seams() {
+    let only = std::env::var("DM").unwrap_or_default();
+    let cfg = cfg_from_env();
+    for path in mesh_files("train").unwrap().iter().filter(|p| p.to_string_lossy().contains(&only)) {
+        let mesh = load_quad_mesh(path);
+        let pts = mesh.vertices.clone();
+        let (_, c) = coverage(&pts, &mesh.quads, &cfg);
+        let mut ord: std::collections::HashMap<[u32; 4], [u32; 4]> = Default::default();
+        for q in &c.quads {
+            ord.insert(key(q), *q);
+        }
+        let nrm = |q: &[u32; 4]| {
+            let p = q.map(|i| pts[i as usize]);
+            let a = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
+            let b = [p[3][0] - p[1][0], p[3][1] - p[1][1], p[3][2] - p[1][2]];
+            let n = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+            let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt().max(1e-30);
+            n.map(|x| x / l)
+        };
+        let mut by_edge: std::collections::HashMap<(u32, u32), Vec<[u32; 4]>> = Default::default();
+        for f in &mesh.quads {
+            if let Some(q) = ord.get(&key(f)) {
+                for i in 0..4 {
+                    let (a, b) = (q[i], q[(i + 1) % 4]);
+                    by_edge.entry((a.min(b), a.max(b))).or_default().push(*q);
+                }
+            }
+        }
+        let (mut pairs, mut seam, mut seam_fix, mut ok_broken, mut ambiguous) = (0, 0, 0, 0, 0);
+        for ((a, b), qs) in &by_edge {
+            if qs.len() != 2 {
+                continue;
+            }
+            pairs += 1;
+            let dir = |q: &[u32; 4]| (0..4).any(|i| q[i] == *a && q[(i + 1) % 4] == *b);
+            let same = dir(&qs[0]) == dir(&qs[1]);
+            let d = {
+                let (x, y) = (nrm(&qs[0]), nrm(&qs[1]));
+                x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
+            };
+            if d.abs() < 0.5 {
+                ambiguous += 1;
+            }
+            if same {
+                seam += 1;
+                seam_fix += (d <= -0.5) as usize;
+            } else {
+                ok_broken += (d <= -0.5) as usize;
+            }
+        }
+        println!(
+            "{:28} adjacent true pairs {pairs} seams {seam} ({:.4}) fixed by normals {seam_fix} | consistent pairs the rule would break {ok_broken} | |dot|<0.5 {ambiguous}",
+            path.file_stem().unwrap().to_string_lossy(),
+            seam as f64 / pairs.max(1) as f64
+        );
+    }
+}
+
+/// Corner-normal agreement of the true faces among the candidates: the share whose
+/// smallest dot of a corner's (oriented) PCA normal with the face normal from the
+/// candidate's order is negative (a corner across an orientation seam), below 0.5, and
+/// the same with |dot| (what a sign-free reading would see).
+fn agreement() {
+    let only = std::env::var("DM").unwrap_or_default();
+    let cfg = cfg_from_env();
+    for path in mesh_files("train").unwrap().iter().filter(|p| p.to_string_lossy().contains(&only)) {
+        let mesh = load_quad_mesh(path);
+        let pts = mesh.vertices.clone();
+        let (_, c) = coverage(&pts, &mesh.quads, &cfg);
+        let truth: HashSet<[u32; 4]> = mesh.quads.iter().map(key).collect();
+        let local = point2quad::pipeline::frame::Frame::fit(&pts).unwrap().to_local_all(&pts);
+        let (mut n, mut neg, mut low, mut low_abs) = (0usize, 0usize, 0usize, 0usize);
+        for q in c.quads.iter().filter(|q| truth.contains(&key(q))) {
+            let p = q.map(|i| local[i as usize]);
+            let a = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
+            let b = [p[3][0] - p[1][0], p[3][1] - p[1][1], p[3][2] - p[1][2]];
+            let f = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+            let l = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt().max(1e-30);
+            let dots: Vec<f32> = q
+                .iter()
+                .map(|&v| {
+                    let m = c.normals[v as usize];
+                    (m[0] * f[0] + m[1] * f[1] + m[2] * f[2]) / l
+                })
+                .collect();
+            let mn = dots.iter().copied().fold(f32::INFINITY, f32::min);
+            let mna = dots.iter().map(|d| d.abs()).fold(f32::INFINITY, f32::min);
+            n += 1;
+            neg += (mn < 0.0) as usize;
+            low += (mn < 0.5) as usize;
+            low_abs += (mna < 0.5) as usize;
+        }
+        println!(
+            "{:28} true candidates {n} min corner dot < 0: {:.4}  < 0.5: {:.4}  |dot| < 0.5: {:.4}",
+            path.file_stem().unwrap().to_string_lossy(),
+            neg as f64 / n.max(1) as f64,
+            low as f64 / n.max(1) as f64,
+            low_abs as f64 / n.max(1) as f64
         );
     }
 }
@@ -578,6 +715,8 @@ fn main() {
         Some("far") => far_ceilings(),
         Some("ranks") => ranks(),
         Some("normals") => normals_check(),
+        Some("seams") => seams(),
+        Some("agreement") => agreement(),
         _ => eprintln!("usage: coverage_diagnostics ceilings|mesh|sweep|losses (see the file header)"),
     }
 }

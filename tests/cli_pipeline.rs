@@ -366,6 +366,7 @@ fn refine_trains_rounds_that_reconstruct_reads() {
     let m = point2quad::pipeline::model::Model::load(Path::new(&refined)).unwrap();
     assert_eq!(m.config().refine_rounds, 2);
     assert_eq!(m.config().refine_widths, vec![4]);
+    assert_eq!(m.config().refine_sides, point2quad::pipeline::refine::SideRule::Normals);
     let cloud = s.p("cloud.xyz");
     ok(&["synth", "--from", &s.p("meshes/b_torus.obj"), "-o", &cloud, "--seed", "2"]);
     let mesh = s.p("out.obj");
@@ -384,6 +385,7 @@ fn refine_trains_rounds_that_reconstruct_reads() {
         ("--batch", "0"),
         ("--lr", "nan"),
         ("--val-fraction", "1"),
+        ("--sides", "left"),
     ] {
         let err = fails(&["refine", "--data", &data, "--model", &model, "--out", &never, opt, val], 2);
         assert!(err.contains(opt), "{opt} {val}: {err}");

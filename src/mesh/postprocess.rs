@@ -37,6 +37,12 @@ pub struct PostprocessConfig {
     /// 0.9602 / 0.9627 at 0, 0.9625 / 0.9650 at 1, 0.9629 / 0.9650 at 2, 0.9630 / 0.9651
     /// at 8.
     pub support_weight: f32,
+    /// Whether that support reads sides like [`crate::pipeline::refine::SideRule::Normals`]:
+    /// a face running the side the same way still counts as the neighbour across it
+    /// when the two faces' normals point opposite ways ([`opposite_normals`]: one of
+    /// them was ordered against the other's orientation). Default true (session 8; false is
+    /// the session-4 rule, direction alone).
+    pub support_normal_sides: bool,
     /// After step (b), open components of at most this many faces are removed (floaters;
     /// [`remove_small_open_components`]). 0 keeps them.
     pub max_floater_faces: usize,
@@ -57,6 +63,7 @@ impl Default for PostprocessConfig {
             score_limit: 10,
             score_filter: true,
             support_weight: 2.0,
+            support_normal_sides: true,
             max_floater_faces: 4,
             rescue: RescueConfig::default(),
             fill_holes: true,
@@ -226,7 +233,36 @@ pub fn score_filter(faces: &[[u32; 4]], probs: &[f32], keep: &mut [bool], score_
 ///
 /// # Panics
 /// If `keep` or `probs` is shorter than `faces`.
-pub fn support_priority(faces: &[[u32; 4]], probs: &[f32], keep: &[bool], weight: f32) -> Vec<f32> {
+///
+/// With `positions` (the faces' corners), a face running the side the same way counts
+/// as across it when the two faces' normals are opposite ([`opposite_normals`]), and
+/// one running it the other way then does not, so a neighbour ordered against this
+/// face's orientation (an orientation seam of the point normals) still confirms it;
+/// without, by direction alone.
+pub fn support_priority(
+    positions: Option<&[[f64; 3]]>,
+    faces: &[[u32; 4]],
+    probs: &[f32],
+    keep: &[bool],
+    weight: f32,
+) -> Vec<f32> {
+    let nrm: Option<Vec<[f32; 3]>> = positions.map(|pos| {
+        faces
+            .iter()
+            .map(|q| {
+                let p = q.map(|i| pos[i as usize]);
+                let a = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
+                let b = [p[3][0] - p[1][0], p[3][1] - p[1][1], p[3][2] - p[1][2]];
+                let c = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+                let l = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+                if l > 0.0 && l.is_finite() {
+                    c.map(|x| (x / l) as f32)
+                } else {
+                    [0.0; 3]
+                }
+            })
+            .collect()
+    });
     let soup = FaceSoup::new(faces);
     // Whether face `g` runs from `a` to `b` along one of its sides.
     let runs = |g: &[u32; 4], a: u32, b: u32| (0..4).any(|i| g[i] == a && g[(i + 1) % 4] == b);
@@ -244,7 +280,21 @@ pub fn support_priority(faces: &[[u32; 4]], probs: &[f32], keep: &[bool], weight
                     // orientation); a face running a → b lies on the same side: a rival.
                     soup.edge_faces(fe[i] as usize)
                         .iter()
-                        .filter(|&&g| g as usize != f && keep[g as usize] && runs(&faces[g as usize], b, a))
+                        .filter(|&&g| {
+                            g as usize != f
+                                && keep[g as usize]
+                                && match &nrm {
+                                    None => runs(&faces[g as usize], b, a),
+                                    Some(n) => {
+                                        let gf = &faces[g as usize];
+                                        if opposite_normals(n[f], n[g as usize]) {
+                                            runs(gf, a, b)
+                                        } else {
+                                            runs(gf, b, a)
+                                        }
+                                    }
+                                }
+                        })
                         .map(|&g| probs[g as usize])
                         .fold(0.0f32, f32::max)
                 })
@@ -252,6 +302,19 @@ pub fn support_priority(faces: &[[u32; 4]], probs: &[f32], keep: &[bool], weight
             probs[f] + weight * support / 4.0
         })
         .collect()
+}
+
+/// Whether two faces' unit normals (each from its own cyclic order) point opposite
+/// ways: more than 120° apart (dot ≤ −0.5). Two faces sharing an edge normally lie on
+/// the same side of it when they run it the same way (a rival) and across it when they
+/// run it the opposite way (a neighbour), which holds where their orders are
+/// consistently oriented; when their normals are opposite, one of them was ordered
+/// against the other's orientation (an orientation seam of the propagated point
+/// normals) and the reading is reversed. Between −0.5 and 1 the direction decides: at
+/// a sharp 90° edge the normals say nothing. (Also the refinement rounds' rule:
+/// [`crate::pipeline::refine::SideRule::Normals`].)
+pub fn opposite_normals(nc: [f32; 3], nd: [f32; 3]) -> bool {
+    nc[0] * nd[0] + nc[1] * nd[1] + nc[2] * nd[2] <= -0.5
 }
 
 /// The insertion order of step (b): faces with `keep[i]`, highest probability first,
@@ -373,7 +436,8 @@ pub fn postprocess_with_reserve(
         report.removed_by_score = score_filter(faces, probs, &mut keep, cfg.score_limit);
     }
     let order = if cfg.support_weight != 0.0 {
-        insertion_order(&support_priority(faces, probs, &keep, cfg.support_weight), &keep)
+        let at = cfg.support_normal_sides.then_some(positions);
+        insertion_order(&support_priority(at, faces, probs, &keep, cfg.support_weight), &keep)
     } else {
         insertion_order(probs, &keep)
     };
@@ -548,7 +612,7 @@ mod tests {
         pos.push([1.6, 0.6, 0.5]);
         let faces = [[0, 1, 4, 3], [1, 2, 5, 4], [3, 4, 7, 6], [4, 5, 8, 7], [1, 2, 9, 4]];
         let probs = [0.9, 0.6, 0.9, 0.9, 0.7];
-        let pri = support_priority(&faces, &probs, &[true; 5], 2.0);
+        let pri = support_priority(None, &faces, &probs, &[true; 5], 2.0);
         // B: sides 5→4 and 4→1 confirmed by D and A (0.9 each); R: only 4→1.
         assert!((pri[1] - (0.6 + 2.0 * 1.8 / 4.0)).abs() < 1e-6, "{pri:?}");
         assert!((pri[4] - (0.7 + 2.0 * 0.9 / 4.0)).abs() < 1e-6, "{pri:?}");

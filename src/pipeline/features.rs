@@ -95,6 +95,40 @@ pub fn to_local_frame(row: &mut [f32]) {
     }
 }
 
+/// Makes a network input row blind to the sign of the point normals (the model's
+/// [`crate::pipeline::model::ModelConfig::sign_free_normals`]): each corner normal
+/// (F_info columns 17–28) that points against the face normal
+/// (p_2 − p_0) × (p_3 − p_1) is negated, and, when the row carries the context columns,
+/// their corner-agreement dots (10–13 of [`context_features`]) become absolute values.
+/// Point normals get their signs by propagation, which leaves orientation seams (on
+/// `train/`, 5–18% of the true faces of the organic meshes have a corner whose normal
+/// points against the face); after this a corner across a seam reads like any other.
+/// Works in either frame (the face normal is taken from the row's own corners).
+///
+/// # Panics
+/// If `row` is shorter than [`F_INFO_DIM`] (or than `F_INFO_DIM + CONTEXT_DIM` with
+/// `with_context`).
+pub fn sign_free_normals(row: &mut [f32], with_context: bool) {
+    let p = |i: usize| [row[3 * i], row[3 * i + 1], row[3 * i + 2]];
+    let (p0, p1, p2, p3) = (p(0), p(1), p(2), p(3));
+    let a = [p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]];
+    let b = [p3[0] - p1[0], p3[1] - p1[1], p3[2] - p1[2]];
+    let n = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    for i in 0..4 {
+        let c = 17 + 3 * i;
+        if row[c] * n[0] + row[c + 1] * n[1] + row[c + 2] * n[2] < 0.0 {
+            for v in &mut row[c..c + 3] {
+                *v = -*v;
+            }
+        }
+    }
+    if with_context {
+        for v in &mut row[F_INFO_DIM + 10..F_INFO_DIM + 14] {
+            *v = v.abs();
+        }
+    }
+}
+
 /// Undirected edge key.
 #[inline]
 fn edge_key(a: u32, b: u32) -> u64 {

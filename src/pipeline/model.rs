@@ -21,7 +21,7 @@ use crate::nn::checkpoint::{self, Checkpoint, TrainState};
 use crate::nn::conv1d::{Conv1d, ConvBnAct};
 use crate::nn::kpfcnn::{prepare, BlockKind, InputFeatures, Kpfcnn, KpfcnnConfig};
 use crate::nn::module::{Module, ResidualBlock};
-use crate::pipeline::refine::Refiner;
+use crate::pipeline::refine::{Refiner, SideRule};
 use crate::rng::Rng;
 use crate::spatial::neighborhoods::NeighborCap;
 use crate::tensor::{Act, Graph, ParamStore, Tensor, Var};
@@ -43,6 +43,11 @@ pub struct ModelConfig {
     /// ([`crate::pipeline::features::to_local_frame`], applied inside the model, so
     /// callers always pass the cloud-frame rows) instead of the cloud's frame.
     pub local_frame: bool,
+    /// Whether the model reads the point normals without their signs
+    /// ([`crate::pipeline::features::sign_free_normals`], applied inside the model
+    /// after the frame, so callers pass the same rows). Written to the config only when
+    /// set; older files are without.
+    pub sign_free_normals: bool,
     /// Face-encoder widths: the outputs of its 5 layers (residual block after the 2nd).
     pub face_widths: [usize; 5],
     /// Per-point feature width d_P gathered for each corner (0: no point encoder).
@@ -63,6 +68,10 @@ pub struct ModelConfig {
     pub refine_rounds: usize,
     /// Hidden widths of each refinement round's MLP.
     pub refine_widths: Vec<usize>,
+    /// How the refinement rounds read rivals and neighbours (`refine_sides` in the
+    /// file, written only for [`SideRule::Normals`]; files without it are
+    /// [`SideRule::Direction`], the rule before session 8).
+    pub refine_sides: SideRule,
 }
 
 impl ModelConfig {
@@ -74,6 +83,7 @@ impl ModelConfig {
             preset: "paper".into(),
             use_context: false,
             local_frame: false,
+            sign_free_normals: false,
             face_widths: [128, 128, 256, 512, 256],
             point_dim: 64,
             point_encoder: Some(KpfcnnConfig { out_dim: 64, ..KpfcnnConfig::paper() }),
@@ -82,6 +92,7 @@ impl ModelConfig {
             bn_momentum: 0.02,
             refine_rounds: 0,
             refine_widths: Vec::new(),
+            refine_sides: SideRule::Direction,
         }
     }
 
@@ -94,6 +105,7 @@ impl ModelConfig {
             preset: "default".into(),
             use_context: true,
             local_frame: true,
+            sign_free_normals: false,
             face_widths: [64, 64, 96, 128, 96],
             point_dim: 0,
             point_encoder: None,
@@ -102,6 +114,7 @@ impl ModelConfig {
             bn_momentum: 0.1,
             refine_rounds: 0,
             refine_widths: Vec::new(),
+            refine_sides: SideRule::Direction,
         }
     }
 
@@ -197,12 +210,18 @@ impl ModelConfig {
         if self.local_frame {
             t += "local_frame = true\n";
         }
+        if self.sign_free_normals {
+            t += "sign_free_normals = true\n";
+        }
         if self.refine_rounds > 0 {
             t += &format!(
                 "refine_rounds = {}\nrefine_widths = {}\n",
                 self.refine_rounds,
                 list(&self.refine_widths)
             );
+            if self.refine_sides != SideRule::Direction {
+                t += &format!("refine_sides = {}\n", self.refine_sides.name());
+            }
         }
         if let Some(k) = &self.point_encoder {
             let blocks: Vec<&str> = k.blocks.iter().map(|&b| block_name(b)).collect();
@@ -269,6 +288,10 @@ impl ModelConfig {
                 "preset" => c.preset = v.to_string(),
                 "use_context" => c.use_context = v.parse().map_err(|_| bad("bad bool"))?,
                 "local_frame" => c.local_frame = v.parse().map_err(|_| bad("bad bool"))?,
+                "sign_free_normals" => {
+                    c.sign_free_normals = v.parse().map_err(|_| bad("bad bool"))?;
+                    optional_seen += 1;
+                }
                 "face_in" => face_in = Some(int(v)?),
                 "face_widths" => {
                     let w = usize_list(v)?;
@@ -284,6 +307,11 @@ impl ModelConfig {
                 }
                 "refine_widths" => {
                     c.refine_widths = usize_list(v)?;
+                    optional_seen += 1;
+                }
+                "refine_sides" => {
+                    c.refine_sides = SideRule::from_name(v)
+                        .ok_or_else(|| bad("refine_sides must be direction or normals"))?;
                     optional_seen += 1;
                 }
                 _ if k.starts_with("kp_") => {
@@ -451,7 +479,13 @@ impl Model {
         // Last of all, so a model with refinement rounds draws the classifier's initial
         // weights of the same model without them.
         let refine = if config.refine_rounds > 0 {
-            Some(Refiner::new(&mut params, config.refine_rounds, &config.refine_widths, &mut rng)?)
+            Some(Refiner::new(
+                &mut params,
+                config.refine_rounds,
+                &config.refine_widths,
+                config.refine_sides,
+                &mut rng,
+            )?)
         } else {
             None
         };
@@ -522,7 +556,7 @@ impl Model {
     ) -> Result<Vec<f32>> {
         let base = self.predict_base(points, corners, face_features)?;
         match &self.net.refine {
-            Some(r) => r.apply(&self.params, corners, &base, points.len()),
+            Some(r) => r.apply(&self.params, points, corners, &base),
             None => Ok(base),
         }
     }
@@ -539,15 +573,25 @@ impl Model {
     }
 
     /// This model's classifier (and point encoder) with `rounds` fresh refinement
-    /// rounds of hidden `widths` (initialised from `seed`; any rounds `self` had are
-    /// dropped). Its probabilities equal `self`'s classifier's until the rounds are
-    /// trained ([`crate::pipeline::refine::train_refiner`]).
+    /// rounds of hidden `widths` reading sides by `sides` (initialised from `seed`; any
+    /// rounds `self` had are dropped). Its probabilities equal `self`'s classifier's
+    /// until the rounds are trained ([`crate::pipeline::refine::train_refiner`]).
     ///
     /// # Errors
     /// `InvalidInput` for a zero width or more than [`MAX_REFINE_ROUNDS`] rounds.
-    pub fn with_refinement(&self, rounds: usize, widths: &[usize], seed: u64) -> Result<Model> {
-        let config =
-            ModelConfig { refine_rounds: rounds, refine_widths: widths.to_vec(), ..self.net.config.clone() };
+    pub fn with_refinement(
+        &self,
+        rounds: usize,
+        widths: &[usize],
+        sides: SideRule,
+        seed: u64,
+    ) -> Result<Model> {
+        let config = ModelConfig {
+            refine_rounds: rounds,
+            refine_widths: widths.to_vec(),
+            refine_sides: sides,
+            ..self.net.config.clone()
+        };
         let mut out = Model::new(config, seed)?;
         for id in self.params.ids() {
             let name = self.params.name(id);
@@ -602,10 +646,17 @@ impl Model {
     /// inference both go through this.
     pub fn framed(&self, mut rows: Vec<f32>) -> Vec<f32> {
         let fin = self.net.config.face_in();
-        if self.net.config.local_frame && fin >= crate::pipeline::features::F_INFO_DIM {
+        let (local, sign_free) = (self.net.config.local_frame, self.net.config.sign_free_normals);
+        if (local || sign_free) && fin >= crate::pipeline::features::F_INFO_DIM {
+            let ctx = self.net.config.use_context;
             crate::par::for_each_chunk_mut(&mut rows, fin * 256, |_, chunk| {
                 for row in chunk.chunks_mut(fin) {
-                    crate::pipeline::features::to_local_frame(row);
+                    if local {
+                        crate::pipeline::features::to_local_frame(row);
+                    }
+                    if sign_free {
+                        crate::pipeline::features::sign_free_normals(row, ctx);
+                    }
                 }
             });
         }
@@ -876,6 +927,17 @@ mod tests {
         let old = ModelConfig::from_text(&def.replace("local_frame = true\n", ""), p).unwrap();
         assert_eq!(old, ModelConfig { local_frame: false, ..ModelConfig::default_preset() });
         assert!(ModelConfig::from_text(&def.replace("local_frame = true", "local_frame = yes"), p).is_err());
+        // `sign_free_normals` likewise.
+        assert!(!def.contains("sign_free_normals"));
+        let sf = ModelConfig { sign_free_normals: true, ..ModelConfig::default_preset() };
+        let sf_text = sf.to_text();
+        assert!(sf_text.contains("sign_free_normals = true\n"), "{sf_text}");
+        assert_eq!(ModelConfig::from_text(&sf_text, p).unwrap(), sf);
+        assert!(ModelConfig::from_text(
+            &sf_text.replace("sign_free_normals = true", "sign_free_normals = 1"),
+            p
+        )
+        .is_err());
         // Point-encoder keys: all needed with point_dim > 0, none allowed without, each
         // value checked.
         let kp = ModelConfig::default_kp().to_text();
@@ -899,13 +961,17 @@ mod tests {
     }
 
     /// The shipped weights (the `default` preset plus 2 refinement rounds of widths
-    /// 32, 32) load, and re-serialise to the very same bytes.
+    /// 32, 32 reading sides by normals) load, and re-serialise to the very same bytes.
     #[test]
     fn shipped_weights_load_and_reserialise_bit_exactly() {
         let bytes = include_bytes!("../../fixtures/point2quad-default.p2qm");
         let m = Model::from_bytes(bytes, Path::new("fixture")).unwrap();
-        let want =
-            ModelConfig { refine_rounds: 2, refine_widths: vec![32, 32], ..ModelConfig::default_preset() };
+        let want = ModelConfig {
+            refine_rounds: 2,
+            refine_widths: vec![32, 32],
+            refine_sides: SideRule::Normals,
+            ..ModelConfig::default_preset()
+        };
         assert_eq!(m.config(), &want);
         assert_eq!(m.to_checkpoint(None).to_bytes(), bytes.to_vec());
     }
@@ -959,6 +1025,55 @@ mod tests {
                 assert!(worst < 1e-6, "local frame: worst difference {worst}");
             } else {
                 assert!(worst > 1e-5, "cloud frame: rotation changed nothing ({worst})");
+            }
+        }
+    }
+
+    /// A `sign_free_normals` model gives the same probabilities when some corners'
+    /// point normals are negated (an orientation seam), with their context agreement
+    /// dots negated alike; a model without it does not. Also in the cloud frame.
+    #[test]
+    fn sign_free_models_ignore_the_signs_of_point_normals() {
+        use crate::pipeline::features::F_INFO_DIM;
+        let mut rng = Rng::new(4);
+        let fin = ModelConfig::default_preset().face_in();
+        let (mut rows, mut seamed) = (Vec::new(), Vec::new());
+        for k in 0..16 {
+            let t = k as f32 * 0.1;
+            let q = [[0.0, 0.0, 0.0], [1.0 + t, 0.1, 0.0], [1.1, 1.0, 0.2 * t], [0.0, 0.9 + t, 0.1]];
+            let mut row: Vec<f32> = (0..fin).map(|_| rng.f32()).collect();
+            let mut f = [0.0f32; F_INFO_DIM];
+            crate::pipeline::features::f_info_row(&q, &[1.0; 4], [0, 1, 2, 3], &mut f);
+            row[..F_INFO_DIM].copy_from_slice(&f);
+            // Corner normals near +z (the face normal's side), tilted at random.
+            for i in 0..4 {
+                let n = [0.3 * (rng.f32() - 0.5), 0.3 * (rng.f32() - 0.5), 1.0];
+                row[17 + 3 * i..20 + 3 * i].copy_from_slice(&n);
+                row[F_INFO_DIM + 10 + i] = 0.8 + 0.2 * rng.f32();
+            }
+            let mut s = row.clone();
+            for i in [1, 3] {
+                for v in &mut s[17 + 3 * i..20 + 3 * i] {
+                    *v = -*v;
+                }
+                s[F_INFO_DIM + 10 + i] = -s[F_INFO_DIM + 10 + i];
+            }
+            rows.extend(row);
+            seamed.extend(s);
+        }
+        for (local, sign_free) in [(true, true), (false, true), (true, false)] {
+            let cfg = ModelConfig {
+                local_frame: local,
+                sign_free_normals: sign_free,
+                ..ModelConfig::default_preset()
+            };
+            let model = Model::new(cfg, 3).unwrap();
+            let (a, b) = (model.predict(&rows).unwrap(), model.predict(&seamed).unwrap());
+            let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+            if sign_free {
+                assert!(worst == 0.0, "local {local}: a seam changed a probability by {worst}");
+            } else {
+                assert!(worst > 1e-5, "signed model: the seam changed nothing ({worst})");
             }
         }
     }

@@ -120,7 +120,7 @@ pub fn reconstruct_with_report(
     // rivals and neighbours: the same as `predict_with_points`, timed apart.
     let probs = match model.refiner() {
         Some(r) => {
-            let p = r.apply(&model.params, &cands.quads, &base, local.len())?;
+            let p = r.apply(&model.params, &local, &cands.quads, &base)?;
             clock.lap(&mut report, "refine");
             p
         }

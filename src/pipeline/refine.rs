@@ -15,6 +15,15 @@
 //! Every aggregate is sorted over the candidate's 4 edges (or corners), so the features
 //! do not depend on which corner a candidate's cyclic order starts at, nor on the order
 //! of the candidate list (property-tested against a brute-force reference).
+//!
+//! **Sides** ([`SideRule`]). Candidates are ordered counter-clockwise about the proposing
+//! point's normal, and those normals are oriented by propagation, which leaves
+//! orientation seams: on 1.5% of the pairs of adjacent ground-truth faces of `train/`
+//! (7–12% on armadillo, feline, monkey and the thin shells), the two candidates run their
+//! shared edge the same way, so by direction alone the true neighbour reads as a rival.
+//! [`SideRule::Normals`] (models refined since session 8) also compares the two
+//! candidates' own normals ([`opposite_normals`]); [`SideRule::Direction`] is the session-5 rule
+//! that older model files keep.
 
 use crate::nn::conv1d::Conv1d;
 use crate::nn::loss::weighted_cross_entropy;
@@ -43,14 +52,63 @@ fn logit(p: f32) -> f32 {
 pub struct CandidateGraph {
     quads: Vec<[u32; 4]>,
     n_points: usize,
-    /// Directed edges; slot `4·c + i` is edge (q_i → q_{i+1}) of candidate c.
-    dir: Groups,
-    /// Per slot `4·c + i`: the group of the reversed edge (`NONE` when no candidate
-    /// has it).
-    rev_group: Vec<u32>,
+    /// Under [`SideRule::Direction`]: the directed edges (slot `4·c + i` is edge
+    /// (q_i → q_{i+1}) of candidate c), and per slot the group of the reversed edge
+    /// (`NONE` when no candidate has it).
+    dir: Option<(Groups, Vec<u32>)>,
     /// Unordered pairs; slot `6·c + j` is pair j of candidate c (edges 0–3, then the
     /// diagonals (q0, q2), (q1, q3)).
     pairs: Groups,
+    /// Under [`SideRule::Normals`]: each candidate's [`quad_normal`].
+    normals: Option<Vec<[f32; 3]>>,
+}
+
+/// How a refinement round decides which candidates sharing an edge lie on the same side
+/// of it (a rival) and which across it (a neighbour). See the module header.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SideRule {
+    /// By the direction they run the edge alone: the same way = the same side (exact
+    /// where the candidates' orders are consistently oriented).
+    Direction,
+    /// By direction, reversed where the two candidates' normals ([`quad_normal`]) point
+    /// opposite ways ([`opposite_normals`]).
+    Normals,
+}
+
+impl SideRule {
+    /// `direction` / `normals`, as model files and `refine --sides` spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            SideRule::Direction => "direction",
+            SideRule::Normals => "normals",
+        }
+    }
+
+    /// Inverse of [`SideRule::name`].
+    pub fn from_name(s: &str) -> Option<SideRule> {
+        match s {
+            "direction" => Some(SideRule::Direction),
+            "normals" => Some(SideRule::Normals),
+            _ => None,
+        }
+    }
+}
+
+pub use crate::mesh::postprocess::opposite_normals;
+
+/// Unit normal of quad `q` over `points` from its cyclic order: (q2 − q0) × (q3 − q1)
+/// normalised; zero for a degenerate quad.
+pub fn quad_normal(points: &[[f32; 3]], q: [u32; 4]) -> [f32; 3] {
+    let p = q.map(|i| points[i as usize]);
+    let a = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
+    let b = [p[3][0] - p[1][0], p[3][1] - p[1][1], p[3][2] - p[1][2]];
+    let c = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    let l = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+    if l > 0.0 && l.is_finite() {
+        c.map(|x| x / l)
+    } else {
+        [0.0; 3]
+    }
 }
 
 /// "No group" (a reversed edge no candidate has).
@@ -159,12 +217,14 @@ fn sorted4(mut v: [f32; 4]) -> [f32; 4] {
 }
 
 impl CandidateGraph {
-    /// Groups `quads` (corner indices below `n_points`).
+    /// Groups `quads` (corners index `points`) for rounds that read sides by `rule`
+    /// (only [`SideRule::Normals`] reads the positions).
     ///
     /// # Errors
-    /// `InvalidInput` naming the first candidate with a corner `>= n_points` or a
+    /// `InvalidInput` naming the first candidate with a corner `>= points.len()` or a
     /// repeated corner, or for more than 2^29 candidates.
-    pub fn new(quads: &[[u32; 4]], n_points: usize) -> Result<CandidateGraph> {
+    pub fn new(quads: &[[u32; 4]], points: &[[f32; 3]], rule: SideRule) -> Result<CandidateGraph> {
+        let n_points = points.len();
         crate::pipeline::model::check_corners(quads, n_points)?;
         if let Some(c) = quads.iter().position(|q| (0..4).any(|i| (i + 1..4).any(|j| q[i] == q[j]))) {
             return Err(Error::invalid(format!("candidate {c} {:?} repeats a corner", quads[c])));
@@ -189,10 +249,19 @@ impl CandidateGraph {
             let (lo, hi) = lo_hi(q[1], q[3]);
             pairs.push((lo, hi, 6 * c + 5));
         }
-        let (dir, pairs) =
-            crate::par::join(|| Groups::new(n_points, &dir, 4), || Groups::new(n_points, &pairs, 6));
-        let rev_group = quads.iter().flat_map(|q| (0..4).map(|i| dir.find(q[(i + 1) % 4], q[i]))).collect();
-        Ok(CandidateGraph { quads: quads.to_vec(), n_points, dir, rev_group, pairs })
+        let (dir, pairs) = match rule {
+            SideRule::Direction => {
+                let (dir, pairs) =
+                    crate::par::join(|| Groups::new(n_points, &dir, 4), || Groups::new(n_points, &pairs, 6));
+                let rev_group =
+                    quads.iter().flat_map(|q| (0..4).map(|i| dir.find(q[(i + 1) % 4], q[i]))).collect();
+                (Some((dir, rev_group)), pairs)
+            }
+            SideRule::Normals => (None, Groups::new(n_points, &pairs, 6)),
+        };
+        let normals = (rule == SideRule::Normals)
+            .then(|| crate::par::map(quads.len(), |c| quad_normal(points, quads[c])));
+        Ok(CandidateGraph { quads: quads.to_vec(), n_points, dir, pairs, normals })
     }
 
     /// The refinement input of every candidate ([`refine_features`] documents the
@@ -215,7 +284,7 @@ impl CandidateGraph {
                 return Err(Error::invalid(format!("refine features: candidate {c} has {what} {}", v[c])));
             }
         }
-        let dir = group_best(&self.dir.members, &self.dir.start, probs);
+        let dir = self.dir.as_ref().map(|(d, _)| group_best(&d.members, &d.start, probs));
         let pair = group_best(&self.pairs.members, &self.pairs.start, probs);
         let mut mass = vec![0.0f64; self.n_points];
         let mut high = vec![0u32; self.n_points];
@@ -234,8 +303,34 @@ impl CandidateGraph {
                 let (mut rival, mut across, mut shared) = ([0.0f32; 4], [0.0f32; 4], [0.0f32; 4]);
                 let (mut at, mut hi) = ([0.0f32; 4], [0.0f32; 4]);
                 for i in 0..4 {
-                    rival[i] = best_other(&dir, self.dir.of_slot[4 * c + i], me);
-                    across[i] = best_other(&dir, self.rev_group[4 * c + i], me);
+                    if let (Some((d, rev)), Some(best)) = (&self.dir, &dir) {
+                        rival[i] = best_other(best, d.of_slot[4 * c + i], me);
+                        across[i] = best_other(best, rev[4 * c + i], me);
+                    } else if let Some(nrm) = &self.normals {
+                        let (a, b) = (q[i], q[(i + 1) % 4]);
+                        let g = self.pairs.of_slot[6 * c + i] as usize;
+                        let (mut r, mut x) = (0.0f32, 0.0f32);
+                        for &d in &self.pairs.members
+                            [self.pairs.start[g] as usize..self.pairs.start[g + 1] as usize]
+                        {
+                            if d == me {
+                                continue;
+                            }
+                            let qd = self.quads[d as usize];
+                            let fwd = (0..4).any(|j| qd[j] == a && qd[(j + 1) % 4] == b);
+                            let bwd = (0..4).any(|j| qd[j] == b && qd[(j + 1) % 4] == a);
+                            let pd = probs[d as usize];
+                            let opp = opposite_normals(nrm[c], nrm[d as usize]);
+                            if (fwd && !opp) || (bwd && opp) {
+                                r = r.max(pd);
+                            }
+                            if (bwd && !opp) || (fwd && opp) {
+                                x = x.max(pd);
+                            }
+                        }
+                        rival[i] = r;
+                        across[i] = x;
+                    }
                     shared[i] = best_other(&pair, self.pairs.of_slot[6 * c + i], me);
                     let a = q[i] as usize;
                     at[i] = (mass[a] - p as f64) as f32;
@@ -268,10 +363,11 @@ impl CandidateGraph {
 /// four sorted ascending; "other" = any candidate but this one):
 ///
 /// * 0: logit of this candidate's current probability;
-/// * 1–4: per directed edge (q_i → q_{i+1}), the best other candidate with the same
-///   directed edge (a rival on the same side: at most one of them can be a face);
-/// * 5–8: per directed edge, the best candidate with the reversed edge (a neighbour
-///   across it);
+/// * 1–4: per edge (q_i → q_{i+1}), the best other candidate with that edge on the
+///   same side (a rival: at most one of them can be a face). Sides by the graph's
+///   [`SideRule`]: under `Direction`, the candidates with the same directed edge;
+/// * 5–8: per edge, the best other candidate with that edge on the other side (a
+///   neighbour across it; under `Direction`, those with the reversed edge);
 /// * 9–12: per edge, neighbour minus rival (columns 5–8 minus 1–4, edge by edge);
 /// * 13: the best other candidate holding both ends of one of this one's diagonals
 ///   (as an edge or a diagonal: it overlaps this one);
@@ -286,8 +382,14 @@ impl CandidateGraph {
 ///
 /// # Errors
 /// As [`CandidateGraph::new`] and [`CandidateGraph::features`].
-pub fn refine_features(quads: &[[u32; 4]], probs: &[f32], base: &[f32], n_points: usize) -> Result<Vec<f32>> {
-    CandidateGraph::new(quads, n_points)?.features(probs, base)
+pub fn refine_features(
+    quads: &[[u32; 4]],
+    points: &[[f32; 3]],
+    rule: SideRule,
+    probs: &[f32],
+    base: &[f32],
+) -> Result<Vec<f32>> {
+    CandidateGraph::new(quads, points, rule)?.features(probs, base)
 }
 
 /// A layer's weight `[cout × cin]`, bias, `cin` and `cout`, borrowed from the store.
@@ -327,6 +429,8 @@ pub struct RefineRound {
 pub struct Refiner {
     /// In application order.
     pub rounds: Vec<RefineRound>,
+    /// How the rounds read rivals and neighbours (fixed when they are trained).
+    pub sides: SideRule,
 }
 
 impl Refiner {
@@ -334,7 +438,13 @@ impl Refiner {
     ///
     /// # Errors
     /// `InvalidInput` for a zero width or a name clash.
-    pub fn new(params: &mut ParamStore, rounds: usize, widths: &[usize], rng: &mut Rng) -> Result<Refiner> {
+    pub fn new(
+        params: &mut ParamStore,
+        rounds: usize,
+        widths: &[usize],
+        sides: SideRule,
+        rng: &mut Rng,
+    ) -> Result<Refiner> {
         let mut out = Vec::with_capacity(rounds);
         for r in 0..rounds {
             let name = format!("refine.{r}");
@@ -350,7 +460,7 @@ impl Refiner {
             }
             out.push(RefineRound { mean, scale, layers });
         }
-        Ok(Refiner { rounds: out })
+        Ok(Refiner { rounds: out, sides })
     }
 
     /// Standardised rows of `x` for round `r`.
@@ -440,11 +550,11 @@ impl Refiner {
     pub fn apply(
         &self,
         params: &ParamStore,
+        points: &[[f32; 3]],
         quads: &[[u32; 4]],
         base: &[f32],
-        n_points: usize,
     ) -> Result<Vec<f32>> {
-        let graph = CandidateGraph::new(quads, n_points)?;
+        let graph = CandidateGraph::new(quads, points, self.sides)?;
         let mut p = base.to_vec();
         for r in 0..self.rounds.len() {
             let f = graph.features(&p, base)?;
@@ -460,8 +570,8 @@ impl Refiner {
 pub struct RefineSample {
     /// For messages.
     pub name: String,
-    /// Number of points (bounds the corner indices).
-    pub n_points: usize,
+    /// The points the corners index (positions in the classifier's frame).
+    pub points: Vec<[f32; 3]>,
     /// Candidate quads.
     pub quads: Vec<[u32; 4]>,
     /// 1 for a ground-truth face.
@@ -576,11 +686,11 @@ fn all_features(
         .collect()
 }
 
-fn graphs_of(samples: &[RefineSample]) -> Result<Vec<CandidateGraph>> {
+fn graphs_of(samples: &[RefineSample], sides: SideRule) -> Result<Vec<CandidateGraph>> {
     samples
         .iter()
         .map(|s| {
-            CandidateGraph::new(&s.quads, s.n_points)
+            CandidateGraph::new(&s.quads, &s.points, sides)
                 .map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))
         })
         .collect()
@@ -618,7 +728,7 @@ pub fn train_refiner(
     }
     let labels: Vec<u8> = train.iter().flat_map(|s| s.labels.iter().copied()).collect();
     let val_labels: Vec<u8> = val.iter().flat_map(|s| s.labels.iter().copied()).collect();
-    let (train_graphs, val_graphs) = (graphs_of(train)?, graphs_of(val)?);
+    let (train_graphs, val_graphs) = (graphs_of(train, refiner.sides)?, graphs_of(val, refiner.sides)?);
     let mut cur_train: Vec<Vec<f32>> = train.iter().map(|s| s.base.clone()).collect();
     let mut cur_val: Vec<Vec<f32>> = val.iter().map(|s| s.base.clone()).collect();
     let mut rng = Rng::new(cfg.seed);
@@ -717,7 +827,7 @@ mod tests {
     fn row_inference_equals_the_tape_forward() {
         let mut params = ParamStore::new();
         let mut rng = Rng::new(4);
-        let refiner = Refiner::new(&mut params, 2, &[32, 16], &mut rng).unwrap();
+        let refiner = Refiner::new(&mut params, 2, &[32, 16], SideRule::Normals, &mut rng).unwrap();
         let m = 700;
         let feats: Vec<f32> = (0..m * REFINE_DIM).map(|_| rng.uniform(-3.0, 3.0) as f32).collect();
         let mean: Vec<f32> = (0..REFINE_DIM).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();

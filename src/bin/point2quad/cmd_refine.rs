@@ -6,7 +6,9 @@ use crate::cmd_train::{load_dir, Split};
 use crate::output::say;
 use point2quad::nn::checkpoint;
 use point2quad::pipeline::model::{Model, MAX_REFINE_ROUNDS};
-use point2quad::pipeline::refine::{train_refiner, RefineProgress, RefineSample, RefineTrainConfig};
+use point2quad::pipeline::refine::{
+    train_refiner, RefineProgress, RefineSample, RefineTrainConfig, SideRule,
+};
 use point2quad::pipeline::train::{check_samples, sample_input};
 use point2quad::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -20,8 +22,8 @@ USAGE:
 Scores every candidate of the .p2qs samples in DIR with BASE's classifier, then
 trains ROUNDS small MLPs one after the other: each reads, per candidate, its current
 probability and those of its rivals and neighbours (the best other candidate on
-each directed edge, across each edge, over its diagonals, the probability mass at
-its corners) and gives a new probability. BASE's classifier (and point encoder) is
+the same side of each edge, across each edge, over its diagonals, the probability
+mass at its corners) and gives a new probability. BASE's classifier (and point encoder) is
 copied unchanged; rounds BASE already had are replaced. The validation split is
 train's (same hash of the sample name, same --val-fraction and --hold-out), so use the dataset
 BASE was trained on. MODEL is written atomically at the end (a run takes minutes).
@@ -38,6 +40,11 @@ OPTIONS:
     --seed S              initialisation and shuffling seed [0]
     --val-fraction F      share of samples held out for validation [0.15]
     --hold-out A,B,...    also hold out the samples with these names (as train)
+    --sides RULE          how a round tells a rival (same side of an edge) from a
+                          neighbour (across it): normals = by the direction the two
+                          run the edge, reversed where their normals point opposite
+                          ways (an orientation seam); direction = by direction alone
+                          (models refined before session 8) [normals]
 ";
 
 const SPEC: Spec = Spec {
@@ -53,6 +60,7 @@ const SPEC: Spec = Spec {
         "--seed",
         "--val-fraction",
         "--hold-out",
+        "--sides",
     ],
     switches: &[],
 };
@@ -83,6 +91,10 @@ pub fn run(argv: &[String]) -> Result<()> {
     let out = PathBuf::from(a.required(cmd, "--out")?);
     let rounds = a.parsed_in(cmd, "--rounds", 2usize, 1, MAX_REFINE_ROUNDS, "refinement rounds")?;
     let widths = parse_widths(a.value("--widths").unwrap_or("32,32"))?;
+    let sides_name = a.value("--sides").unwrap_or("normals");
+    let sides = SideRule::from_name(sides_name).ok_or_else(|| {
+        Error::Usage(format!("refine: --sides {sides_name:?}: expected normals or direction"))
+    })?;
     let mut cfg = RefineTrainConfig::default();
     cfg.epochs = a.parsed_in(cmd, "--epochs", cfg.epochs, 1, 1000, "passes per round")?;
     cfg.batch = a.parsed_in(cmd, "--batch", cfg.batch, 1, 1_000_000, "candidates per step")?;
@@ -94,7 +106,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let split = Split::from_args(cmd, &a)?;
     crate::output::check_output_path(&out)?;
     let base = Model::load(&base_path)?;
-    let mut model = base.with_refinement(rounds, &widths, cfg.seed)?;
+    let mut model = base.with_refinement(rounds, &widths, sides, cfg.seed)?;
 
     let t0 = std::time::Instant::now();
     let samples = load_dir(&data)?;
@@ -109,13 +121,8 @@ pub fn run(argv: &[String]) -> Result<()> {
             .predict_base(&s.points, &s.candidates, &x)
             .map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))?;
         let validation = split.is_validation(&s.name);
-        let rs = RefineSample {
-            n_points: s.points.len(),
-            name: s.name,
-            quads: s.candidates,
-            labels: s.labels,
-            base: p,
-        };
+        let rs =
+            RefineSample { points: s.points, name: s.name, quads: s.candidates, labels: s.labels, base: p };
         if validation {
             va.push(rs);
         } else {

@@ -33,6 +33,11 @@ OPTIONS:
                             paper       the paper's widths and KPFCNN (25.2M
                                         parameters; slow on a CPU)
                           (ignored with --resume: the checkpoint holds its config)
+    --sign-free-normals   the model reads the point normals without their signs
+                          (a corner normal against the face is negated; the
+                          context's normal agreements become absolute values), so
+                          orientation seams of the propagated normals do not show
+                          (with --config only)
     --epochs N            total epochs, 1..100000 (a resumed run continues up to N) [40]
     --resume CKPT         continue exactly from a MODEL.ckpt written earlier
     --init WEIGHTS        start from these weights (any weights file: its config is
@@ -77,7 +82,7 @@ const SPEC: Spec = Spec {
         "--scale",
         "--jitter",
     ],
-    switches: &["--no-rotate", "--no-augment"],
+    switches: &["--no-rotate", "--no-augment", "--sign-free-normals"],
 };
 
 fn fnv(s: &str) -> u64 {
@@ -229,6 +234,12 @@ pub fn run(argv: &[String]) -> Result<()> {
         return Err(Error::Usage(format!("train: --lr must be a finite number > 0, got {}", cfg.sgd.lr)));
     }
     augmentation(&a, &mut cfg)?;
+    if a.switch("--sign-free-normals") && (a.value("--init").is_some() || a.value("--resume").is_some()) {
+        return Err(Error::Usage(
+            "train: --sign-free-normals cannot be combined with --init or --resume (the weights file holds its config)"
+                .into(),
+        ));
+    }
     if a.value("--init").is_some() && (a.value("--resume").is_some() || a.value("--config").is_some()) {
         return Err(Error::Usage(
             "train: --init cannot be combined with --resume or --config (the weights file holds its config)"
@@ -256,14 +267,16 @@ pub fn run(argv: &[String]) -> Result<()> {
                 // The rounds were trained on this classifier's probabilities: stale after.
                 let m = if m.refiner().is_some() {
                     say!("train: --init {w}: its refinement rounds are dropped (run `point2quad refine` after)");
-                    m.with_refinement(0, &[], 0)?
+                    m.with_refinement(0, &[], point2quad::pipeline::refine::SideRule::Direction, 0)?
                 } else {
                     m
                 };
                 (m, None)
             }
             None => {
-                (Model::new(ModelConfig::preset(a.value("--config").unwrap_or("default"))?, cfg.seed)?, None)
+                let mut config = ModelConfig::preset(a.value("--config").unwrap_or("default"))?;
+                config.sign_free_normals = a.switch("--sign-free-normals");
+                (Model::new(config, cfg.seed)?, None)
             }
         },
     };

@@ -2,7 +2,8 @@
 # make train: the recipe behind fixtures/point2quad-default.p2qm.
 # Data: 80 synthetic shapes (seed 7) + every mesh of ../shared/data/quads/train when
 # present (never eval/ or large/), 10% noise points; then 40 epochs of the default
-# preset, seed 0. HOLD_OUT=a,b,c holds those samples out of training and refinement too
+# preset reading the point normals without their signs (--sign-free-normals, session 8),
+# seed 0. HOLD_OUT=a,b,c holds those samples out of training and refinement too
 # (beside the hashed validation split), to judge a recipe on meshes it never saw; the
 # shipped weights use none (session 7's experiments used qm_monkey,qm_elephant,qm_feline).
 # Resumes from out/train/model.p2qm.ckpt if a run was interrupted.
@@ -22,9 +23,10 @@ if [ ! -f "$DATA/index.txt" ]; then
 fi
 HOLD=()
 [ -n "${HOLD_OUT:-}" ] && HOLD=(--hold-out "$HOLD_OUT")
-RESUME=()
-[ -f "$MODEL.ckpt" ] && RESUME=(--resume "$MODEL.ckpt")
-"$BIN" train --data "$DATA" --out "$MODEL" --config default --epochs "$EPOCHS" --seed 0 "${HOLD[@]}" "${RESUME[@]}"
+# A fresh run chooses the config; a resumed one reads it from its checkpoint.
+START=(--config default --sign-free-normals)
+[ -f "$MODEL.ckpt" ] && START=(--resume "$MODEL.ckpt")
+"$BIN" train --data "$DATA" --out "$MODEL" --epochs "$EPOCHS" --seed 0 "${HOLD[@]}" "${START[@]}"
 "$BIN" refine --data "$DATA" --model "$MODEL" --out "$REFINED" --rounds 2 --seed 0 "${HOLD[@]}"
 cp "$REFINED" fixtures/point2quad-default.p2qm
 echo "train: weights copied to fixtures/point2quad-default.p2qm"

@@ -434,7 +434,8 @@ fn reconstruct_closing_options() {
 
 /// `train --init`: a fine-tune starts from the given weights (their config, epoch 1 of
 /// its own count); a refined model's rounds are dropped with a message; combinations with
-/// --resume or --config are usage errors, a missing file a data error naming it.
+/// --resume or --config are usage errors, a missing file a data error naming it. And
+/// `train --sign-free-normals` writes that flag into a fresh model's config.
 #[test]
 fn train_init_fine_tunes_from_weights() {
     let s = Scratch::new("init");
@@ -475,6 +476,20 @@ fn train_init_fine_tunes_from_weights() {
     let args = with(&["--init", &missing]);
     let err = fails(&args.iter().map(String::as_str).collect::<Vec<_>>(), 1);
     assert!(err.contains("missing.p2qm"), "{err}");
+    // --sign-free-normals: a fresh model that reads normals without their signs; with
+    // --init or --resume (their file holds the config) a usage error.
+    let args = with(&["--sign-free-normals", "--max-candidates", "300"]);
+    ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let sf = point2quad::pipeline::model::Model::load(Path::new(&tuned)).unwrap();
+    assert!(sf.config().sign_free_normals && !a.config().sign_free_normals);
+    let ckpt = format!("{tuned}.ckpt");
+    for extra in
+        [vec!["--sign-free-normals", "--init", &model], vec!["--sign-free-normals", "--resume", &ckpt]]
+    {
+        let args = with(&extra);
+        let err = fails(&args.iter().map(String::as_str).collect::<Vec<_>>(), 2);
+        assert!(err.contains("--sign-free-normals"), "{err}");
+    }
 }
 
 /// `--hold-out` puts the named samples in validation for both `train` and `refine`

@@ -101,8 +101,9 @@ pub fn to_local_frame(row: &mut [f32]) {
 /// (p_2 − p_0) × (p_3 − p_1) is negated, and, when the row carries the context columns,
 /// their corner-agreement dots (10–13 of [`context_features`]) become absolute values.
 /// Point normals get their signs by propagation, which leaves orientation seams (on
-/// `train/`, 5–18% of the true faces of the organic meshes have a corner whose normal
-/// points against the face); after this a corner across a seam reads like any other.
+/// `train/`, 11–18% of the true faces of amo, armadillo, botijo, feline and monkey have a
+/// corner whose normal points against the face; `examples/coverage_diagnostics.rs
+/// agreement`); after this a corner across a seam reads like any other.
 /// Works in either frame (the face normal is taken from the row's own corners).
 ///
 /// # Panics

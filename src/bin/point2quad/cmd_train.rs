@@ -37,7 +37,8 @@ OPTIONS:
                           (a corner normal against the face is negated; the
                           context's normal agreements become absolute values), so
                           orientation seams of the propagated normals do not show
-                          (with --config only)
+                          (a fresh model only: not with --init or --resume; the
+                          shipped weights use it)
     --epochs N            total epochs, 1..100000 (a resumed run continues up to N) [40]
     --resume CKPT         continue exactly from a MODEL.ckpt written earlier
     --init WEIGHTS        start from these weights (any weights file: its config is

@@ -374,6 +374,10 @@ impl Filler<'_> {
         false
     }
 
+    /// Laplacian steps on the added vertices. A step is kept only if no face at the
+    /// vertex ends with a scaled Jacobian below min(`min_scaled_jacobian`, its value
+    /// before the step) or loses its area: a vertex on a border has two neighbours, and
+    /// their mean would put it on the line between them (a flat, degenerate corner).
     fn smooth(&mut self) {
         for _ in 0..self.cfg.smoothing_steps {
             for &v in &self.added {
@@ -383,8 +387,28 @@ impl Filler<'_> {
                     sum = add(sum, self.pos[self.mesh.to_vertex(h).idx()]);
                     n += 1;
                 }
-                if n > 0 {
-                    self.pos[v as usize] = scale(sum, 1.0 / n as f64);
+                if n == 0 {
+                    continue;
+                }
+                let faces: Vec<[VertexId; 4]> =
+                    self.mesh.vertex_faces(VertexId(v)).map(|f| self.mesh.face_vertices(f)).collect();
+                let shape = |pos: &[[f64; 3]], q: &[VertexId; 4]| {
+                    let p = q.map(|x| pos[x.idx()]);
+                    if is_degenerate_quad(&p) {
+                        f64::NEG_INFINITY
+                    } else {
+                        scaled_jacobian(&p)
+                    }
+                };
+                let before: Vec<f64> = faces.iter().map(|q| shape(self.pos, q)).collect();
+                let old = self.pos[v as usize];
+                self.pos[v as usize] = scale(sum, 1.0 / n as f64);
+                let worse = faces
+                    .iter()
+                    .zip(&before)
+                    .any(|(q, &b)| shape(self.pos, q) < b.min(self.cfg.min_scaled_jacobian));
+                if worse {
+                    self.pos[v as usize] = old;
                 }
             }
         }
@@ -543,6 +567,38 @@ mod tests {
         let v = p.len() - 1;
         assert!(dist_sq(p[v], [2.0, 2.0, 0.0]) < 1e-18, "{:?}", p[v]);
         assert_eq!(p[12], [50.0, 50.0, 50.0], "existing positions unchanged");
+    }
+
+    /// Smoothing never flattens a corner: an added vertex on a border has two
+    /// neighbours, and their mean would put it on the line between them (scaled
+    /// Jacobian 0); that step is refused. An interior added vertex still moves.
+    #[test]
+    fn smoothing_keeps_border_vertices_from_flattening_corners() {
+        let cfg = HoleFillConfig::default();
+        let run = |p: &mut Vec<[f64; 3]>, q: &[[u32; 4]], added: Vec<u32>| {
+            let mut m = HalfedgeMesh::from_quads(p.len(), q).unwrap();
+            let mut f = Filler {
+                mesh: &mut m,
+                pos: p,
+                cfg: &cfg,
+                grid: IsolatedGrid { cell: 1.0, cells: HashMap::new() },
+                cos_tol: 0.0,
+                report: HoleFillReport::default(),
+                added,
+            };
+            f.smooth();
+        };
+        // One unit square [c, a, v, b]; v (index 2) was added. Its neighbours' mean is
+        // (0.5, 0.5), on the diagonal a–b: the corner at v would be flat.
+        let mut p = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+        run(&mut p, &[[0, 1, 2, 3]], vec![2]);
+        assert_eq!(p[2], [1.0, 1.0, 0.0], "the border vertex moved");
+        assert!(scaled_jacobian(&[p[0], p[1], p[2], p[3]]) > 0.99);
+        // The centre of a 2×2 grid, added off centre, goes to the centre.
+        let (mut p, q) = grid(2);
+        p[4] = [1.3, 0.8, 0.0];
+        run(&mut p, &q, vec![4]);
+        assert!(dist_sq(p[4], [1.0, 1.0, 0.0]) < 1e-18, "{:?}", p[4]);
     }
 
     #[test]

@@ -38,7 +38,7 @@
 #[path = "../tests/common/candidates.rs"]
 mod cands_common;
 use cands_common::*;
-use point2quad::pipeline::candidates::{knn_table, CandidateConfig};
+use point2quad::pipeline::candidates::{knn_table, CandidateConfig, Candidates};
 use std::collections::HashSet;
 
 fn kset(knn: &point2quad::spatial::kdtree::KnnTable, i: usize, k: usize) -> Vec<u32> {
@@ -514,16 +514,24 @@ fn ranks() {
     println!("{name}: rank histogram of missed (99999 = not proposable) {hist:?}; inside 0/1/2/3+ {nins:?}");
 }
 
-/// Share of points whose PCA normal is off the ground-truth vertex normal (area
-/// weighted face normals) by more than 45°, and how the missed faces split by it
-/// (DM = mesh name, all meshes when unset).
-fn normals_check() {
+/// Runs `f` on every `train/` mesh whose name contains `DM` (all when unset) with its
+/// candidates over the clean cloud of its vertices (config from the environment).
+fn each_train_mesh(mut f: impl FnMut(&str, &point2quad::mesh::poly::QuadMesh, &Candidates)) {
     let only = std::env::var("DM").unwrap_or_default();
     let cfg = cfg_from_env();
     for path in mesh_files("train").unwrap().iter().filter(|p| p.to_string_lossy().contains(&only)) {
         let mesh = load_quad_mesh(path);
+        let (_, c) = coverage(&mesh.vertices, &mesh.quads, &cfg);
+        f(&path.file_stem().unwrap().to_string_lossy(), &mesh, &c);
+    }
+}
+
+/// Share of points whose PCA normal is off the ground-truth vertex normal (area
+/// weighted face normals) by more than 45°, and how the missed faces split by it
+/// (DM = mesh name, all meshes when unset).
+fn normals_check() {
+    each_train_mesh(|name, mesh, c| {
         let pts = mesh.vertices.clone();
-        let (_, c) = coverage(&pts, &mesh.quads, &cfg);
         let have: HashSet<[u32; 4]> = c.quads.iter().map(key).collect();
         let mut gn = vec![[0.0f64; 3]; pts.len()];
         for f in &mesh.quads {
@@ -540,33 +548,26 @@ fn normals_check() {
         // The frame is a similarity: map the GT normal's tip through it and compare
         // directions (|cos|, the PCA sign is not the point here).
         let frame = point2quad::pipeline::frame::Frame::fit(&pts).unwrap();
-        let bad: Vec<bool> = (0..pts.len())
-            .map(|i| {
-                let g = [pts[i][0] + gn[i][0], pts[i][1] + gn[i][1], pts[i][2] + gn[i][2]];
-                let gl = frame.to_local_all(&[g, pts[i]]);
-                let d = [
-                    (gl[0][0] - gl[1][0]) as f64,
-                    (gl[0][1] - gl[1][1]) as f64,
-                    (gl[0][2] - gl[1][2]) as f64,
-                ];
-                let dl = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                let n = c.normals[i];
-                dl == 0.0
-                    || ((d[0] * n[0] as f64 + d[1] * n[1] as f64 + d[2] * n[2] as f64) / dl).abs()
-                        < std::f64::consts::FRAC_1_SQRT_2
-            })
-            .collect();
-        let nb = bad.iter().filter(|&&b| b).count();
-        // Signed: well-aligned normals (|cos| ≥ 0.707) that point the wrong way.
-        let flipped: Vec<bool> = (0..pts.len())
+        // Per point: the cosine of the GT normal (in the cloud's frame) with the PCA one.
+        let cos: Vec<f64> = (0..pts.len())
             .map(|i| {
                 let g = [pts[i][0] + gn[i][0], pts[i][1] + gn[i][1], pts[i][2] + gn[i][2]];
                 let gl = frame.to_local_all(&[g, pts[i]]);
                 let d: Vec<f64> = (0..3).map(|a| (gl[0][a] - gl[1][a]) as f64).collect();
+                let dl = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
                 let n = c.normals[i];
-                !bad[i] && (d[0] * n[0] as f64 + d[1] * n[1] as f64 + d[2] * n[2] as f64) < 0.0
+                let dot = d[0] * n[0] as f64 + d[1] * n[1] as f64 + d[2] * n[2] as f64;
+                if dl == 0.0 {
+                    0.0
+                } else {
+                    dot / dl
+                }
             })
             .collect();
+        let bad: Vec<bool> = cos.iter().map(|c| c.abs() < std::f64::consts::FRAC_1_SQRT_2).collect();
+        let nb = bad.iter().filter(|&&b| b).count();
+        // Signed: well-aligned normals (|cos| ≥ 0.707) that point the wrong way.
+        let flipped: Vec<bool> = (0..pts.len()).map(|i| !bad[i] && cos[i] < 0.0).collect();
         let nf = flipped.iter().filter(|&&b| b).count();
         // Orientation seams: GT edges between two well-aligned normals of which exactly one is flipped.
         let (mut seams, mut edges) = (0usize, 0usize);
@@ -589,7 +590,7 @@ fn normals_check() {
         }
         println!(
             "{:28} points {} bad normals {:.4} flipped {:.4} seam-edges {:.4} | missed faces {} of which with a bad-normal corner {}",
-            path.file_stem().unwrap().to_string_lossy(),
+            name,
             pts.len(),
             nb as f64 / pts.len() as f64,
             nf as f64 / pts.len() as f64,
@@ -597,7 +598,7 @@ fn normals_check() {
             missed,
             missed_bad
         );
-    }
+    });
 }
 
 /// Orientation seams among candidates: pairs of ground-truth faces sharing an edge,
@@ -605,12 +606,8 @@ fn normals_check() {
 /// consistently oriented pair runs it both ways), and how many of those a comparison
 /// of the two candidates' own normals (|n_c·n_d| ≥ 0.5) would read correctly.
 fn seams() {
-    let only = std::env::var("DM").unwrap_or_default();
-    let cfg = cfg_from_env();
-    for path in mesh_files("train").unwrap().iter().filter(|p| p.to_string_lossy().contains(&only)) {
-        let mesh = load_quad_mesh(path);
+    each_train_mesh(|name, mesh, c| {
         let pts = mesh.vertices.clone();
-        let (_, c) = coverage(&pts, &mesh.quads, &cfg);
         let mut ord: std::collections::HashMap<[u32; 4], [u32; 4]> = Default::default();
         for q in &c.quads {
             ord.insert(key(q), *q);
@@ -656,10 +653,10 @@ fn seams() {
         }
         println!(
             "{:28} adjacent true pairs {pairs} seams {seam} ({:.4}) fixed by normals {seam_fix} | consistent pairs the rule would break {ok_broken} | |dot|<0.5 {ambiguous}",
-            path.file_stem().unwrap().to_string_lossy(),
+            name,
             seam as f64 / pairs.max(1) as f64
         );
-    }
+    });
 }
 
 /// Corner-normal agreement of the true faces among the candidates: the share whose
@@ -667,12 +664,8 @@ fn seams() {
 /// candidate's order is negative (a corner across an orientation seam), below 0.5, and
 /// the same with |dot| (what a sign-free reading would see).
 fn agreement() {
-    let only = std::env::var("DM").unwrap_or_default();
-    let cfg = cfg_from_env();
-    for path in mesh_files("train").unwrap().iter().filter(|p| p.to_string_lossy().contains(&only)) {
-        let mesh = load_quad_mesh(path);
+    each_train_mesh(|name, mesh, c| {
         let pts = mesh.vertices.clone();
-        let (_, c) = coverage(&pts, &mesh.quads, &cfg);
         let truth: HashSet<[u32; 4]> = mesh.quads.iter().map(key).collect();
         let local = point2quad::pipeline::frame::Frame::fit(&pts).unwrap().to_local_all(&pts);
         let (mut n, mut neg, mut low, mut low_abs) = (0usize, 0usize, 0usize, 0usize);
@@ -698,12 +691,12 @@ fn agreement() {
         }
         println!(
             "{:28} true candidates {n} min corner dot < 0: {:.4}  < 0.5: {:.4}  |dot| < 0.5: {:.4}",
-            path.file_stem().unwrap().to_string_lossy(),
+            name,
             neg as f64 / n.max(1) as f64,
             low as f64 / n.max(1) as f64,
             low_abs as f64 / n.max(1) as f64
         );
-    }
+    });
 }
 
 fn main() {

@@ -246,20 +246,17 @@ pub fn support_priority(
     keep: &[bool],
     weight: f32,
 ) -> Vec<f32> {
+    // Each face's unit normal from its own order (zero for a degenerate face).
     let nrm: Option<Vec<[f32; 3]>> = positions.map(|pos| {
         faces
             .iter()
             .map(|q| {
                 let p = q.map(|i| pos[i as usize]);
-                let a = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
-                let b = [p[3][0] - p[1][0], p[3][1] - p[1][1], p[3][2] - p[1][2]];
-                let c = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
-                let l = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-                if l > 0.0 && l.is_finite() {
-                    c.map(|x| (x / l) as f32)
-                } else {
-                    [0.0; 3]
-                }
+                crate::math::normalize(crate::math::cross(
+                    crate::math::sub(p[2], p[0]),
+                    crate::math::sub(p[3], p[1]),
+                ))
+                .map_or([0.0; 3], |n| n.map(|x| x as f32))
             })
             .collect()
     });

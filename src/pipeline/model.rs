@@ -961,14 +961,14 @@ mod tests {
     }
 
     /// The shipped weights (the `default` preset reading normals without their signs,
-    /// plus 2 refinement rounds of widths 32, 32 reading sides by normals) load, and
+    /// plus 3 refinement rounds of widths 32, 32 reading sides by normals) load, and
     /// re-serialise to the very same bytes.
     #[test]
     fn shipped_weights_load_and_reserialise_bit_exactly() {
         let bytes = include_bytes!("../../fixtures/point2quad-default.p2qm");
         let m = Model::from_bytes(bytes, Path::new("fixture")).unwrap();
         let want = ModelConfig {
-            refine_rounds: 2,
+            refine_rounds: 3,
             refine_widths: vec![32, 32],
             refine_sides: SideRule::Normals,
             sign_free_normals: true,

@@ -39,6 +39,7 @@
 mod cands_common;
 use cands_common::*;
 use point2quad::pipeline::candidates::{knn_table, CandidateConfig, Candidates};
+use point2quad::pipeline::refine::{opposite_normals, quad_normal};
 use std::collections::HashSet;
 
 fn kset(knn: &point2quad::spatial::kdtree::KnnTable, i: usize, k: usize) -> Vec<u32> {
@@ -612,14 +613,8 @@ fn seams() {
         for q in &c.quads {
             ord.insert(key(q), *q);
         }
-        let nrm = |q: &[u32; 4]| {
-            let p = q.map(|i| pts[i as usize]);
-            let a = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
-            let b = [p[3][0] - p[1][0], p[3][1] - p[1][1], p[3][2] - p[1][2]];
-            let n = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
-            let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt().max(1e-30);
-            n.map(|x| x / l)
-        };
+        let pts32 = to_f32(&pts);
+        let nrm = |q: &[u32; 4]| quad_normal(&pts32, *q);
         let mut by_edge: std::collections::HashMap<(u32, u32), Vec<[u32; 4]>> = Default::default();
         for f in &mesh.quads {
             if let Some(q) = ord.get(&key(f)) {
@@ -637,18 +632,16 @@ fn seams() {
             pairs += 1;
             let dir = |q: &[u32; 4]| (0..4).any(|i| q[i] == *a && q[(i + 1) % 4] == *b);
             let same = dir(&qs[0]) == dir(&qs[1]);
-            let d = {
-                let (x, y) = (nrm(&qs[0]), nrm(&qs[1]));
-                x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
-            };
-            if d.abs() < 0.5 {
+            let (x, y) = (nrm(&qs[0]), nrm(&qs[1]));
+            let opposite = opposite_normals(x, y);
+            if (x[0] * y[0] + x[1] * y[1] + x[2] * y[2]).abs() < 0.5 {
                 ambiguous += 1;
             }
             if same {
                 seam += 1;
-                seam_fix += (d <= -0.5) as usize;
+                seam_fix += opposite as usize;
             } else {
-                ok_broken += (d <= -0.5) as usize;
+                ok_broken += opposite as usize;
             }
         }
         println!(
@@ -670,16 +663,12 @@ fn agreement() {
         let local = point2quad::pipeline::frame::Frame::fit(&pts).unwrap().to_local_all(&pts);
         let (mut n, mut neg, mut low, mut low_abs) = (0usize, 0usize, 0usize, 0usize);
         for q in c.quads.iter().filter(|q| truth.contains(&key(q))) {
-            let p = q.map(|i| local[i as usize]);
-            let a = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
-            let b = [p[3][0] - p[1][0], p[3][1] - p[1][1], p[3][2] - p[1][2]];
-            let f = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
-            let l = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt().max(1e-30);
+            let f = quad_normal(&local, *q);
             let dots: Vec<f32> = q
                 .iter()
                 .map(|&v| {
                     let m = c.normals[v as usize];
-                    (m[0] * f[0] + m[1] * f[1] + m[2] * f[2]) / l
+                    m[0] * f[0] + m[1] * f[1] + m[2] * f[2]
                 })
                 .collect();
             let mn = dots.iter().copied().fold(f32::INFINITY, f32::min);

@@ -154,7 +154,7 @@ impl Candidates {
 }
 
 #[inline]
-fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+pub(crate) fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 #[inline]
@@ -162,7 +162,7 @@ fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 #[inline]
-fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+pub(crate) fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 #[inline]
@@ -276,13 +276,23 @@ pub(crate) struct QuadGeom {
     pub jacobian: f32,
 }
 
+/// Unit normal of the quad `p` from its diagonals, normalize((p2 − p0) × (p3 − p1)), so
+/// it follows the cyclic order; the zero vector for a degenerate quad.
+pub(crate) fn diagonal_normal(p: [[f32; 3]; 4]) -> [f32; 3] {
+    let nd = cross(sub(p[2], p[0]), sub(p[3], p[1]));
+    let nl = norm(nd);
+    if nl > 0.0 {
+        [nd[0] / nl, nd[1] / nl, nd[2] / nl]
+    } else {
+        [0.0; 3]
+    }
+}
+
 /// Corner i: e_i = p_{i+1} − p_i, c_i = e_{i−1} × e_i (DESIGN §2).
 pub(crate) fn quad_geom(p: [[f32; 3]; 4]) -> QuadGeom {
     let e = [sub(p[1], p[0]), sub(p[2], p[1]), sub(p[3], p[2]), sub(p[0], p[3])];
     let len = [norm(e[0]), norm(e[1]), norm(e[2]), norm(e[3])];
-    let nd = cross(sub(p[2], p[0]), sub(p[3], p[1]));
-    let nl = norm(nd);
-    let normal = if nl > 0.0 { [nd[0] / nl, nd[1] / nl, nd[2] / nl] } else { [0.0; 3] };
+    let normal = diagonal_normal(p);
     let mut sine = [0.0f32; 4];
     let mut corner_normal = [[0.0f32; 3]; 4];
     let mut jacobian = f32::INFINITY;

@@ -110,11 +110,9 @@ pub fn to_local_frame(row: &mut [f32]) {
 /// If `row` is shorter than [`F_INFO_DIM`] (or than `F_INFO_DIM + CONTEXT_DIM` with
 /// `with_context`).
 pub fn sign_free_normals(row: &mut [f32], with_context: bool) {
+    use crate::pipeline::candidates::{cross, sub};
     let p = |i: usize| [row[3 * i], row[3 * i + 1], row[3 * i + 2]];
-    let (p0, p1, p2, p3) = (p(0), p(1), p(2), p(3));
-    let a = [p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]];
-    let b = [p3[0] - p1[0], p3[1] - p1[1], p3[2] - p1[2]];
-    let n = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    let n = cross(sub(p(2), p(0)), sub(p(3), p(1)));
     for i in 0..4 {
         let c = 17 + 3 * i;
         if row[c] * n[0] + row[c + 1] * n[1] + row[c + 2] * n[2] < 0.0 {

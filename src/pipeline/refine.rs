@@ -52,15 +52,22 @@ fn logit(p: f32) -> f32 {
 pub struct CandidateGraph {
     quads: Vec<[u32; 4]>,
     n_points: usize,
-    /// Under [`SideRule::Direction`]: the directed edges (slot `4·c + i` is edge
-    /// (q_i → q_{i+1}) of candidate c), and per slot the group of the reversed edge
-    /// (`NONE` when no candidate has it).
-    dir: Option<(Groups, Vec<u32>)>,
     /// Unordered pairs; slot `6·c + j` is pair j of candidate c (edges 0–3, then the
     /// diagonals (q0, q2), (q1, q3)).
     pairs: Groups,
-    /// Under [`SideRule::Normals`]: each candidate's [`quad_normal`].
-    normals: Option<Vec<[f32; 3]>>,
+    /// What the graph's [`SideRule`] reads sides from.
+    sides: Sides,
+}
+
+/// The per-rule part of a [`CandidateGraph`].
+#[derive(Clone, Debug)]
+enum Sides {
+    /// [`SideRule::Direction`]: the directed edges (slot `4·c + i` is edge
+    /// (q_i → q_{i+1}) of candidate c), and per slot the group of the reversed edge
+    /// (`NONE` when no candidate has it).
+    Direction { dir: Groups, rev_group: Vec<u32> },
+    /// [`SideRule::Normals`]: each candidate's [`quad_normal`].
+    Normals(Vec<[f32; 3]>),
 }
 
 /// How a refinement round decides which candidates sharing an edge lie on the same side
@@ -99,16 +106,7 @@ pub use crate::mesh::postprocess::opposite_normals;
 /// Unit normal of quad `q` over `points` from its cyclic order: (q2 − q0) × (q3 − q1)
 /// normalised; zero for a degenerate quad.
 pub fn quad_normal(points: &[[f32; 3]], q: [u32; 4]) -> [f32; 3] {
-    let p = q.map(|i| points[i as usize]);
-    let a = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
-    let b = [p[3][0] - p[1][0], p[3][1] - p[1][1], p[3][2] - p[1][2]];
-    let c = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
-    let l = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-    if l > 0.0 && l.is_finite() {
-        c.map(|x| x / l)
-    } else {
-        [0.0; 3]
-    }
+    crate::pipeline::candidates::diagonal_normal(q.map(|i| points[i as usize]))
 }
 
 /// "No group" (a reversed edge no candidate has).
@@ -249,19 +247,47 @@ impl CandidateGraph {
             let (lo, hi) = lo_hi(q[1], q[3]);
             pairs.push((lo, hi, 6 * c + 5));
         }
-        let (dir, pairs) = match rule {
+        let (sides, pairs) = match rule {
             SideRule::Direction => {
                 let (dir, pairs) =
                     crate::par::join(|| Groups::new(n_points, &dir, 4), || Groups::new(n_points, &pairs, 6));
                 let rev_group =
                     quads.iter().flat_map(|q| (0..4).map(|i| dir.find(q[(i + 1) % 4], q[i]))).collect();
-                (Some((dir, rev_group)), pairs)
+                (Sides::Direction { dir, rev_group }, pairs)
             }
-            SideRule::Normals => (None, Groups::new(n_points, &pairs, 6)),
+            SideRule::Normals => (
+                Sides::Normals(crate::par::map(quads.len(), |c| quad_normal(points, quads[c]))),
+                Groups::new(n_points, &pairs, 6),
+            ),
         };
-        let normals = (rule == SideRule::Normals)
-            .then(|| crate::par::map(quads.len(), |c| quad_normal(points, quads[c])));
-        Ok(CandidateGraph { quads: quads.to_vec(), n_points, dir, pairs, normals })
+        Ok(CandidateGraph { quads: quads.to_vec(), n_points, pairs, sides })
+    }
+
+    /// Under [`SideRule::Normals`]: the best rival and the best neighbour of candidate
+    /// `c` on its edge `i`, scanning the other candidates that hold that pair of points
+    /// as an edge.
+    fn sides_by_normals(&self, nrm: &[[f32; 3]], probs: &[f32], c: usize, i: usize) -> (f32, f32) {
+        let q = self.quads[c];
+        let (a, b) = (q[i], q[(i + 1) % 4]);
+        let g = self.pairs.of_slot[6 * c + i] as usize;
+        let (mut rival, mut across) = (0.0f32, 0.0f32);
+        for &d in &self.pairs.members[self.pairs.start[g] as usize..self.pairs.start[g + 1] as usize] {
+            if d as usize == c {
+                continue;
+            }
+            let qd = self.quads[d as usize];
+            let fwd = (0..4).any(|j| qd[j] == a && qd[(j + 1) % 4] == b);
+            let bwd = (0..4).any(|j| qd[j] == b && qd[(j + 1) % 4] == a);
+            let pd = probs[d as usize];
+            let opp = opposite_normals(nrm[c], nrm[d as usize]);
+            if (fwd && !opp) || (bwd && opp) {
+                rival = rival.max(pd);
+            }
+            if (bwd && !opp) || (fwd && opp) {
+                across = across.max(pd);
+            }
+        }
+        (rival, across)
     }
 
     /// The refinement input of every candidate ([`refine_features`] documents the
@@ -284,7 +310,10 @@ impl CandidateGraph {
                 return Err(Error::invalid(format!("refine features: candidate {c} has {what} {}", v[c])));
             }
         }
-        let dir = self.dir.as_ref().map(|(d, _)| group_best(&d.members, &d.start, probs));
+        let dir_best = match &self.sides {
+            Sides::Direction { dir, .. } => group_best(&dir.members, &dir.start, probs),
+            Sides::Normals(_) => Vec::new(),
+        };
         let pair = group_best(&self.pairs.members, &self.pairs.start, probs);
         let mut mass = vec![0.0f64; self.n_points];
         let mut high = vec![0u32; self.n_points];
@@ -303,34 +332,13 @@ impl CandidateGraph {
                 let (mut rival, mut across, mut shared) = ([0.0f32; 4], [0.0f32; 4], [0.0f32; 4]);
                 let (mut at, mut hi) = ([0.0f32; 4], [0.0f32; 4]);
                 for i in 0..4 {
-                    if let (Some((d, rev)), Some(best)) = (&self.dir, &dir) {
-                        rival[i] = best_other(best, d.of_slot[4 * c + i], me);
-                        across[i] = best_other(best, rev[4 * c + i], me);
-                    } else if let Some(nrm) = &self.normals {
-                        let (a, b) = (q[i], q[(i + 1) % 4]);
-                        let g = self.pairs.of_slot[6 * c + i] as usize;
-                        let (mut r, mut x) = (0.0f32, 0.0f32);
-                        for &d in &self.pairs.members
-                            [self.pairs.start[g] as usize..self.pairs.start[g + 1] as usize]
-                        {
-                            if d == me {
-                                continue;
-                            }
-                            let qd = self.quads[d as usize];
-                            let fwd = (0..4).any(|j| qd[j] == a && qd[(j + 1) % 4] == b);
-                            let bwd = (0..4).any(|j| qd[j] == b && qd[(j + 1) % 4] == a);
-                            let pd = probs[d as usize];
-                            let opp = opposite_normals(nrm[c], nrm[d as usize]);
-                            if (fwd && !opp) || (bwd && opp) {
-                                r = r.max(pd);
-                            }
-                            if (bwd && !opp) || (fwd && opp) {
-                                x = x.max(pd);
-                            }
-                        }
-                        rival[i] = r;
-                        across[i] = x;
-                    }
+                    (rival[i], across[i]) = match &self.sides {
+                        Sides::Direction { dir, rev_group } => (
+                            best_other(&dir_best, dir.of_slot[4 * c + i], me),
+                            best_other(&dir_best, rev_group[4 * c + i], me),
+                        ),
+                        Sides::Normals(nrm) => self.sides_by_normals(nrm, probs, c, i),
+                    };
                     shared[i] = best_other(&pair, self.pairs.of_slot[6 * c + i], me);
                     let a = q[i] as usize;
                     at[i] = (mass[a] - p as f64) as f32;

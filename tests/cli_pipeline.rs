@@ -423,6 +423,17 @@ fn reconstruct_closing_options() {
     let (b_full, b_plain) = (border(&full), border(&plain));
     assert!(b_plain > 0.0, "the case must have holes");
     assert!(b_full <= b_plain, "{b_full} > {b_plain}");
+    // Untangling re-splits faces over the same vertices: same border, worst shape no worse.
+    assert!(err.contains("badly shaped faces re-split"), "{err}");
+    let tangled = s.p("tangled.obj");
+    ok(&["reconstruct", &cloud, "-o", &tangled, "--no-untangle"]);
+    assert_eq!(border(&tangled), b_full);
+    let worst = |mesh: &str| {
+        let out = ok(&["eval", mesh, "--json"]);
+        let json = parse_json(String::from_utf8_lossy(&out.stdout).trim()).unwrap();
+        json.get("scaled_jacobian_min").and_then(Json::num).unwrap()
+    };
+    assert!(worst(&full) >= worst(&tangled), "{} < {}", worst(&full), worst(&tangled));
     for (opt, v) in [("--rescue-min-prob", "1.5"), ("--rescue-min-prob", "x"), ("--max-floater-faces", "-1")]
     {
         let o = s.p("bad.obj");
@@ -527,6 +538,68 @@ fn hold_out_names_whole_samples_for_train_and_refine() {
                 assert!(err.contains("d_cone"), "{err}");
             }
         }
+    }
+    assert!(!Path::new(&never).exists());
+}
+
+/// `train --fold I/K` holds out one fold of the samples (a hash of the name, beside the
+/// validation split), and `refine --fold-models` scores each training sample with the
+/// model of its fold. The three samples fall into folds (of 3) 1, 2, 1; of 2, all in 1.
+#[test]
+fn folds_hold_out_samples_and_route_refinement_scoring() {
+    let s = Scratch::new("folds");
+    let model = trained(&s);
+    let data = s.p("data");
+    let other = s.p("other.p2qm");
+    let base = ["train", "--data", &data, "--out", &other, "--epochs", "1", "--max-candidates", "300"];
+    for (fold, want) in [
+        ("0/3", "3 training / 0 validation samples"),
+        ("1/3", "1 training / 2 validation samples"),
+        ("2/3", "2 training / 1 validation samples"),
+    ] {
+        let out = ok(&[&base[..], &["--val-fraction", "0", "--fold", fold]].concat());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(want), "--fold {fold}: {err}");
+    }
+    // A second classifier (another seed, all samples) for the routing check.
+    ok(&[&base[..], &["--val-fraction", "0", "--seed", "9"]].concat());
+    let refine = |out: &str, folds: Option<String>| {
+        let mut args = vec!["refine", "--data", &data, "--model", &model, "--out", out];
+        args.extend(["--widths", "4", "--epochs", "1", "--val-fraction", "0"]);
+        let f;
+        if let Some(v) = folds {
+            f = v;
+            args.extend(["--fold-models", &f]);
+        }
+        ok(&args);
+        std::fs::read(out).unwrap()
+    };
+    let plain = refine(&s.p("plain.p2qm"), None);
+    // Every sample is in fold 1 of 2: scored by the second model only.
+    let same = refine(&s.p("same.p2qm"), Some(format!("{other},{model}")));
+    assert_eq!(plain, same, "fold 1's model is BASE: the rounds must be those of a plain refine");
+    let routed = refine(&s.p("routed.p2qm"), Some(format!("{model},{other}")));
+    assert_ne!(plain, routed, "fold 1's model was not used to score fold 1");
+    let never = s.p("never.p2qm");
+    let signfree = s.p("signfree.p2qm");
+    let mut sf: Vec<&str> = base.to_vec();
+    sf[4] = &signfree;
+    ok(&[&sf[..], &["--val-fraction", "0", "--sign-free-normals"]].concat());
+    for (bad, what) in [
+        (model.clone(), "2 to 16"),
+        (format!("{model},"), "2 to 16"),
+        (format!("{model},{signfree}"), "different input"),
+    ] {
+        let err =
+            fails(&["refine", "--data", &data, "--model", &model, "--out", &never, "--fold-models", &bad], 2);
+        assert!(err.contains("--fold-models") && err.contains(what), "{bad}: {err}");
+    }
+    for bad in ["2/2", "0/1", "1/17", "a/2", "1"] {
+        let mut args: Vec<&str> = base.to_vec();
+        args[4] = &never;
+        args.extend(["--fold", bad]);
+        let err = fails(&args, 2);
+        assert!(err.contains("--fold"), "{bad}: {err}");
     }
     assert!(!Path::new(&never).exists());
 }

@@ -2,7 +2,7 @@
 //! candidates at holes (`mesh::rescue`): the quadrangulation's optimum against brute
 //! force, and mesh invariants (validator, border never longer) on grids with holes.
 
-use point2quad::mesh::close::{close_holes, quadrangulate, CloseConfig};
+use point2quad::mesh::close::{close_holes, quadrangulate, untangle, CloseConfig};
 use point2quad::mesh::halfedge::HalfedgeMesh;
 use point2quad::mesh::handles::FaceId;
 use point2quad::mesh::rescue::{rescue_faces, RescueConfig};
@@ -280,4 +280,147 @@ fn borders_of_open_surfaces_stay_open() {
     let mut mesh = HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).unwrap();
     let lax = CloseConfig { min_loop_coherence: 0.0, min_loop_alignment: -1.0, ..Default::default() };
     assert!(close_holes(&mut mesh, &q.vertices, &lax).quads_added > 0);
+}
+
+/// Sorted corner sets of a mesh's faces, and its boundary half-edges as (from, to).
+fn face_keys(m: &HalfedgeMesh) -> Vec<[u32; 4]> {
+    let mut v: Vec<[u32; 4]> = m
+        .faces()
+        .map(|f| {
+            let mut k = m.face_vertices(f).map(|v| v.0);
+            k.sort_unstable();
+            k
+        })
+        .collect();
+    v.sort_unstable();
+    v
+}
+
+fn border_set(m: &HalfedgeMesh) -> Vec<(u32, u32)> {
+    let mut v: Vec<(u32, u32)> =
+        m.boundary_loops().iter().flatten().map(|&h| (m.from_vertex(h).0, m.to_vertex(h).0)).collect();
+    v.sort_unstable();
+    v
+}
+
+/// Scaled Jacobian of a face by the metric's formula (diagonal normal), in 3-D.
+fn sj3(p: &[[f64; 3]; 4]) -> f64 {
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    };
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let n = cross(sub(p[2], p[0]), sub(p[3], p[1]));
+    let ln = dot(n, n).sqrt();
+    (0..4)
+        .map(|i| {
+            let (e0, e1) = (sub(p[i], p[(i + 3) % 4]), sub(p[(i + 1) % 4], p[i]));
+            dot(cross(e0, e1), n) / (ln * dot(e0, e0).sqrt() * dot(e1, e1).sqrt())
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Grid faces (i, j) and (i + 1, j) (or (i, j + 1) when `vertical`) as their hexagon's
+/// other split by the chord from corner `which` (0 or 1): two quads over the same six
+/// vertices, one of them with a straight corner on a regular grid.
+fn resplit(n: usize, i: usize, j: usize, vertical: bool, which: usize) -> ([usize; 2], [[u32; 4]; 2]) {
+    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+    // The hexagon in the grid's orientation, starting at the pair's first corner.
+    let (hex, faces) = if vertical {
+        (
+            [id(i + 1, j), id(i + 1, j + 1), id(i + 1, j + 2), id(i, j + 2), id(i, j + 1), id(i, j)],
+            [j * n + i, (j + 1) * n + i],
+        )
+    } else {
+        (
+            [id(i, j), id(i + 1, j), id(i + 2, j), id(i + 2, j + 1), id(i + 1, j + 1), id(i, j + 1)],
+            [j * n + i, j * n + i + 1],
+        )
+    };
+    // The true chord joins hexagon corners 1 and 4; the others are 0–3 and 2–5.
+    let a = if which == 0 { 0 } else { 2 };
+    let q1 = [hex[a], hex[a + 1], hex[a + 2], hex[(a + 3) % 6]];
+    let q2 = [hex[(a + 3) % 6], hex[(a + 4) % 6], hex[(a + 5) % 6], hex[a]];
+    (faces, [q1, q2])
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    /// One face pair of a regular grid re-split the wrong way (each new quad has a straight
+    /// corner) is put back exactly: the brute-force reference is the grid itself.
+    #[test]
+    fn untangle_restores_a_wrongly_split_pair(n in 3usize..7, i in 0usize..5, j in 0usize..5, vertical: bool, which in 0usize..2) {
+        let (i, j) = (i % (n - 1), j % (n - 1));
+        let g = grid(n, n, n as f64, n as f64);
+        let (drop, add) = resplit(n, i, j, vertical, which);
+        let mut faces: Vec<[u32; 4]> = g.quads.iter().enumerate().filter(|(k, _)| !drop.contains(k)).map(|(_, q)| *q).collect();
+        faces.extend(add);
+        let mut mesh = HalfedgeMesh::from_quads(g.vertices.len(), &faces).unwrap();
+        let border0 = border_set(&mesh);
+        let replaced = untangle(&mut mesh, &g.vertices, &CloseConfig::default());
+        validate(&mesh).unwrap();
+        prop_assert_eq!(replaced, 2);
+        prop_assert_eq!(face_keys(&mesh), face_keys(&HalfedgeMesh::from_quads(g.vertices.len(), &g.quads).unwrap()));
+        prop_assert_eq!(border_set(&mesh), border0);
+    }
+
+    /// Jittered grids with several pairs re-split the wrong way: untangling keeps the mesh
+    /// valid, the border, the vertices in use and the face count unchanged, never lowers
+    /// the worst scaled Jacobian nor raises Σ(1 − SJ), and leaves no face under the bound
+    /// that a one-neighbour re-split over the jittered grid's own pair would have fixed
+    /// when every pair is far from the others.
+    #[test]
+    fn untangle_keeps_border_and_vertices_and_improves_shape(
+        n in 4usize..9, seed in any::<u64>(), jitter in 0.0f64..0.3, pairs in 1usize..6,
+    ) {
+        let g = grid(n, n, n as f64, n as f64);
+        let mut rng = point2quad::rng::Rng::new(seed);
+        let mut pos = g.vertices.clone();
+        for p in pos.iter_mut() {
+            p[0] += rng.uniform(-jitter, jitter);
+            p[1] += rng.uniform(-jitter, jitter);
+            p[2] += rng.uniform(-jitter, jitter);
+        }
+        let mut used = vec![false; g.quads.len()];
+        let mut faces: Vec<[u32; 4]> = Vec::new();
+        for _ in 0..pairs {
+            let (i, j) = ((rng.uniform(0.0, 1.0) * (n - 1) as f64) as usize, (rng.uniform(0.0, 1.0) * (n - 1) as f64) as usize);
+            let (drop, add) = resplit(n, i.min(n - 2), j.min(n - 2), rng.uniform(0.0, 1.0) < 0.5, (rng.uniform(0.0, 1.0) * 2.0) as usize % 2);
+            if drop.iter().any(|&k| used[k]) {
+                continue;
+            }
+            for k in drop {
+                used[k] = true;
+            }
+            faces.extend(add);
+        }
+        faces.extend(g.quads.iter().enumerate().filter(|(k, _)| !used[*k]).map(|(_, q)| *q));
+        let mut mesh = HalfedgeMesh::from_quads(pos.len(), &faces).unwrap();
+        let shape = |m: &HalfedgeMesh| {
+            let s: Vec<f64> = m.faces().map(|f| sj3(&m.face_vertices(f).map(|v| pos[v.idx()]))).collect();
+            (s.iter().cloned().fold(f64::INFINITY, f64::min), s.iter().map(|x| 1.0 - x).sum::<f64>())
+        };
+        let in_use = |m: &HalfedgeMesh| {
+            let mut v: Vec<u32> = m.faces().flat_map(|f| m.face_vertices(f)).map(|v| v.0).collect();
+            v.sort_unstable();
+            v.dedup();
+            v
+        };
+        let (border0, used0, n0, (min0, cost0)) = (border_set(&mesh), in_use(&mesh), mesh.n_faces(), shape(&mesh));
+        let replaced = untangle(&mut mesh, &pos, &CloseConfig::default());
+        validate(&mesh).unwrap();
+        prop_assert_eq!(border_set(&mesh), border0);
+        prop_assert_eq!(in_use(&mesh), used0);
+        prop_assert_eq!(mesh.n_faces(), n0);
+        let (min1, cost1) = shape(&mesh);
+        prop_assert!(min1 >= min0 - 1e-12, "worst SJ {} -> {}", min0, min1);
+        prop_assert!(cost1 <= cost0 + 1e-9, "cost {} -> {}", cost0, cost1);
+        if replaced == 0 {
+            // (A re-split that `add_face` refused is undone: same faces, other order.)
+            prop_assert!((cost1 - cost0).abs() < 1e-9, "cost {} -> {}", cost0, cost1);
+        } else {
+            prop_assert!(cost1 < cost0);
+        }
+    }
 }

@@ -43,6 +43,10 @@ pub struct CloseConfig {
     pub pair_odd_loops: bool,
     /// At most this many faces are removed to join two odd loops (a path across edges).
     pub max_path_faces: usize,
+    /// Whether [`untangle`] runs at the end of the post-process: a face whose scaled
+    /// Jacobian is under `min_scaled_jacobian` (inverted, folded or flat-cornered) and a
+    /// neighbour are replaced by the best other split of their six corners into two quads.
+    pub untangle: bool,
 }
 
 impl Default for CloseConfig {
@@ -56,6 +60,7 @@ impl Default for CloseConfig {
             min_loop_alignment: 0.5,
             pair_odd_loops: true,
             max_path_faces: 2,
+            untangle: true,
         }
     }
 }
@@ -69,6 +74,8 @@ pub struct CloseReport {
     pub loops_closed: usize,
     /// Quads added.
     pub quads_added: usize,
+    /// Faces replaced by [`untangle`] (each bad face and the neighbours re-split with it).
+    pub untangled: usize,
 }
 
 /// The quads (corner lists in loop order) that close the loop `vs` (the from-vertices of
@@ -426,4 +433,146 @@ fn face_paths(
         frontier = next;
     }
     paths
+}
+
+/// Scaled Jacobian of live face `f`.
+fn face_sj(mesh: &HalfedgeMesh, pos: &[[f64; 3]], f: FaceId) -> f64 {
+    scaled_jacobian(&mesh.face_vertices(f).map(|v| pos[v.idx()]))
+}
+
+/// The border of the faces `set` (live, distinct) as one simple loop: the from-vertices of
+/// its half-edges in order, and the half-edges. `None` when the border is not one simple
+/// loop through every corner of the set (a corner inside the region would be lost).
+fn region_border(mesh: &HalfedgeMesh, set: &[FaceId]) -> Option<(Vec<u32>, Vec<HalfedgeId>)> {
+    let inside = |h: HalfedgeId| mesh.face(h.opposite()).is_some_and(|g| set.contains(&g));
+    let border: Vec<HalfedgeId> =
+        set.iter().flat_map(|&f| mesh.face_halfedges(f)).filter(|&h| !inside(h)).collect();
+    let start = *border.first()?;
+    let mut lp = vec![start];
+    let mut h = start;
+    loop {
+        let to = mesh.to_vertex(h);
+        let mut next = border.iter().filter(|&&e| mesh.from_vertex(e) == to);
+        let n = *next.next()?;
+        if next.next().is_some() {
+            return None; // the border touches itself at `to`
+        }
+        if n == start {
+            break;
+        }
+        lp.push(n);
+        h = n;
+        if lp.len() > border.len() {
+            return None;
+        }
+    }
+    if lp.len() != border.len() {
+        return None;
+    }
+    let vs: Vec<u32> = lp.iter().map(|&e| mesh.from_vertex(e).0).collect();
+    let corners = set.iter().flat_map(|&f| mesh.face_vertices(f)).all(|v| vs.contains(&v.0));
+    corners.then_some((vs, lp))
+}
+
+/// Largest region [`untangle`] re-splits around a bad face.
+const UNTANGLE_MAX_FACES: usize = 5;
+
+/// How much re-splitting the region `set` lowers Σ(1 − scaled Jacobian), and the split,
+/// when its border is one simple loop through all its corners and [`quadrangulate`] finds
+/// a split of it into as many quads that meets the bounds and is better.
+fn resplit_gain(
+    mesh: &HalfedgeMesh,
+    pos: &[[f64; 3]],
+    set: &[FaceId],
+    cfg: &CloseConfig,
+) -> Option<(f64, Vec<[u32; 4]>)> {
+    let (vs, lp) = region_border(mesh, set)?;
+    if vs.len() != 2 * set.len() + 2 {
+        return None;
+    }
+    let across: Vec<Option<[f64; 3]>> = lp.iter().map(|&e| normal_across(mesh, pos, e)).collect();
+    let quads = quadrangulate(mesh, pos, &vs, &across, cfg)?;
+    let new: f64 = quads.iter().map(|q| 1.0 - scaled_jacobian(&q.map(|v| pos[v as usize]))).sum();
+    let old: f64 = set.iter().map(|&g| 1.0 - face_sj(mesh, pos, g)).sum();
+    (old - new > 0.0).then_some((old - new, quads))
+}
+
+/// Re-splits badly shaped faces with their neighbours. For each face `f` whose scaled
+/// Jacobian is under `cfg.min_scaled_jacobian` (inverted, folded over a crease, or with a
+/// straight corner; mostly 4-edge holes that the hole filling closed with the only quad
+/// over their corners), and for each edge-connected region of 2 to 5 faces holding it, the
+/// region's border (one simple loop through all its corners) is split by
+/// [`quadrangulate`] into as many quads as the region has, over the same vertices and
+/// meeting its bounds (and, since chords that are edges are refused, never along the
+/// region's inner edges). The split that lowers Σ(1 − scaled Jacobian) the most replaces
+/// the region. The surface's border and vertex set do not change, so neither does its
+/// closure, and the bad face is always among those replaced. Returns the number of faces
+/// replaced.
+pub fn untangle(mesh: &mut HalfedgeMesh, pos: &[[f64; 3]], cfg: &CloseConfig) -> usize {
+    let bad: Vec<FaceId> =
+        mesh.faces().filter(|&f| face_sj(mesh, pos, f) < cfg.min_scaled_jacobian).collect();
+    let mut replaced = 0;
+    for f in bad {
+        if !mesh.is_face_alive(f) || face_sj(mesh, pos, f) >= cfg.min_scaled_jacobian {
+            continue;
+        }
+        // Every edge-connected set of at most UNTANGLE_MAX_FACES faces holding f, grown
+        // one face across an edge at a time.
+        let mut best: Option<(f64, Vec<FaceId>, Vec<[u32; 4]>)> = None;
+        let mut seen: std::collections::HashSet<Vec<u32>> = std::collections::HashSet::new();
+        let mut frontier: Vec<Vec<FaceId>> = vec![vec![f]];
+        for _ in 1..UNTANGLE_MAX_FACES {
+            let mut next: Vec<Vec<FaceId>> = Vec::new();
+            for set in &frontier {
+                for &g in set {
+                    for h in mesh.face_halfedges(g) {
+                        let Some(n) = mesh.face(h.opposite()) else { continue };
+                        if set.contains(&n) {
+                            continue;
+                        }
+                        let mut grown = set.clone();
+                        grown.push(n);
+                        let mut key: Vec<u32> = grown.iter().map(|x| x.0).collect();
+                        key.sort_unstable();
+                        if !seen.insert(key) {
+                            continue;
+                        }
+                        if let Some((gain, quads)) = resplit_gain(mesh, pos, &grown, cfg) {
+                            if best.as_ref().map_or(true, |b| gain > b.0) {
+                                best = Some((gain, grown.clone(), quads));
+                            }
+                        }
+                        next.push(grown);
+                    }
+                }
+            }
+            frontier = next;
+        }
+        let Some((_, set, quads)) = best else { continue };
+        let old: Vec<[VertexId; 4]> = set.iter().map(|&g| mesh.face_vertices(g)).collect();
+        let mut removed = 0;
+        while removed < set.len() && mesh.remove_face(set[removed]).is_ok() {
+            removed += 1;
+        }
+        let mut added: Vec<FaceId> = Vec::with_capacity(quads.len());
+        if removed == set.len() {
+            for q in &quads {
+                match mesh.add_face(q.map(VertexId)) {
+                    Ok(n) => added.push(n),
+                    Err(_) => break,
+                }
+            }
+        }
+        if removed == set.len() && added.len() == quads.len() {
+            replaced += set.len();
+        } else {
+            for &n in added.iter().rev() {
+                mesh.remove_face(n).expect("internal error: a face just added comes off again");
+            }
+            for c in old[..removed].iter().rev() {
+                mesh.add_face(*c).expect("internal error: a face just removed goes back");
+            }
+        }
+    }
+    replaced
 }

@@ -7,7 +7,7 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use super::close::{close_holes, CloseConfig, CloseReport};
+use super::close::{close_holes, untangle, CloseConfig, CloseReport};
 use super::halfedge::{HalfedgeMesh, InsertOutcome};
 use super::hole_fill::{fill_holes, HoleFillConfig, HoleFillReport};
 use super::poly::QuadMesh;
@@ -477,6 +477,9 @@ pub fn postprocess_with_reserve(
     }
     // Rescued faces and removals can leave new floaters.
     report.floater_faces_removed += remove_small_open_components(&mut mesh, cfg.max_floater_faces);
+    if cfg.close.enabled && cfg.close.untangle {
+        report.close.untangled = untangle(&mut mesh, &pos, &cfg.close);
+    }
     report.components_flipped = orient_components(&mut mesh, &pos, faces, &out);
     report.faces_out = mesh.n_faces();
     report.boundary_loops_out = mesh.boundary_loops().len();

@@ -37,7 +37,12 @@ OPTIONS:
     --no-rescue           do not rescue candidates at holes
     --no-close            leave odd loops and loops the hole filling could not close
                           open (default: pair odd loops through the faces between
-                          them, quadrangulate loops of at most 40 edges)
+                          them, quadrangulate loops of at most 40 edges; implies
+                          --no-untangle)
+    --no-untangle         keep badly shaped faces (scaled Jacobian under 0.02:
+                          inverted, folded) as they are (default: re-split each with
+                          the faces next to it over the same vertices when that gives
+                          better-shaped quads)
 ";
 
 const SPEC: Spec = Spec {
@@ -51,7 +56,7 @@ const SPEC: Spec = Spec {
         "--max-floater-faces",
         "--rescue-min-prob",
     ],
-    switches: &["--no-postprocess", "--no-rescue", "--no-close"],
+    switches: &["--no-postprocess", "--no-rescue", "--no-close", "--no-untangle"],
 };
 
 /// The weights shipped with the project (`make train` writes them), embedded in the
@@ -86,6 +91,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         a.parsed_in(cmd, "--rescue-min-prob", pp.rescue.min_prob, 0.0, 1.0, "it is a probability")?;
     pp.rescue.enabled = !a.switch("--no-rescue");
     pp.close.enabled = !a.switch("--no-close");
+    pp.close.untangle = !a.switch("--no-untangle");
     // Check the output names before the work, not after it.
     point2quad::io::mesh_io::MeshFormat::from_path(&out)?;
     let svg = a.value("--svg").map(Path::new);
@@ -136,7 +142,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let (filled, refused) = (pp.hole_fill.quads_added(), pp.refused_on_insertion + pp.removed_by_score);
     // Through `output::stderr`: `eprintln!` panics when stderr is a closed pipe.
     crate::output::stderr(&format!(
-        "reconstruct: {} points, {} candidates, {} predicted real, {} faces kept ({} removed/refused), {} floater faces removed, {} candidates rescued at holes, {} hole quads filled ({} new vertices), {} loops closed ({} quads, {} faces taken out) -> {}\n",
+        "reconstruct: {} points, {} candidates, {} predicted real, {} faces kept ({} removed/refused), {} floater faces removed, {} candidates rescued at holes, {} hole quads filled ({} new vertices), {} loops closed ({} quads, {} faces taken out), {} badly shaped faces re-split -> {}\n",
         rep.points,
         rep.candidates,
         rep.predicted,
@@ -149,6 +155,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         pp.close.loops_closed,
         pp.close.quads_added,
         pp.close.faces_removed,
+        pp.close.untangled,
         out.display()
     ));
     if rep.faces == 0 {

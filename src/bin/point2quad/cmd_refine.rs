@@ -2,7 +2,7 @@
 //! the classifier's own probabilities over a dataset (the classifier stays frozen).
 
 use crate::args::{Args, Spec};
-use crate::cmd_train::{load_dir, Split};
+use crate::cmd_train::{fold_of, load_dir, Split, MAX_FOLDS};
 use crate::output::say;
 use point2quad::nn::checkpoint;
 use point2quad::pipeline::model::{Model, MAX_REFINE_ROUNDS};
@@ -40,6 +40,14 @@ OPTIONS:
     --seed S              initialisation and shuffling seed [0]
     --val-fraction F      share of samples held out for validation [0.15]
     --hold-out A,B,...    also hold out the samples with these names (as train)
+    --fold-models M0,M1,...
+                          score each training sample of fold i of K (K models, as
+                          `train --fold i/K`) with Mi, a classifier that never saw it,
+                          instead of BASE: the rounds then learn from probabilities
+                          like those BASE gives on clouds it never saw (stacking).
+                          Validation samples are scored with BASE. Each Mi must have
+                          been trained with `--fold i/K` and the same --val-fraction and
+                          --hold-out, and have BASE's input (preset, frame, normals)
     --sides RULE          how a round tells a rival (same side of an edge) from a
                           neighbour (across it): normals = by the direction the two
                           run the edge, reversed where their normals point opposite
@@ -61,6 +69,7 @@ const SPEC: Spec = Spec {
         "--val-fraction",
         "--hold-out",
         "--sides",
+        "--fold-models",
     ],
     switches: &[],
 };
@@ -106,21 +115,53 @@ pub fn run(argv: &[String]) -> Result<()> {
     let split = Split::from_args(cmd, &a)?;
     crate::output::check_output_path(&out)?;
     let base = Model::load(&base_path)?;
+    let fold_models: Vec<Model> = match a.value("--fold-models") {
+        None => Vec::new(),
+        Some(v) => {
+            let paths: Vec<&str> = v.split(',').map(str::trim).collect();
+            if paths.len() < 2 || paths.len() > MAX_FOLDS || paths.iter().any(|p| p.is_empty()) {
+                return Err(Error::Usage(format!(
+                    "refine: --fold-models {v:?}: expected 2 to {MAX_FOLDS} weights files separated by commas"
+                )));
+            }
+            let ms = paths.iter().map(|p| Model::load(Path::new(p))).collect::<Result<Vec<_>>>()?;
+            for (p, m) in paths.iter().zip(&ms) {
+                if m.config().face_in() != base.config().face_in()
+                    || m.config().sign_free_normals != base.config().sign_free_normals
+                    || m.config().local_frame != base.config().local_frame
+                {
+                    return Err(Error::Usage(format!(
+                        "refine: --fold-models: {p} reads a different input from {} (preset, frame or normals)",
+                        base_path.display()
+                    )));
+                }
+            }
+            ms
+        }
+    };
     let mut model = base.with_refinement(rounds, &widths, sides, cfg.seed)?;
 
     let t0 = std::time::Instant::now();
     let samples = load_dir(&data)?;
     check_samples(&samples, &base)?;
+    for m in &fold_models {
+        check_samples(&samples, m)?;
+    }
     split.check_names(cmd, samples.iter().map(|s| s.name.as_str()))?;
     let fin = base.config().face_in();
     let n_samples = samples.len();
     let (mut tr, mut va) = (Vec::new(), Vec::new());
     for (i, s) in samples.into_iter().enumerate() {
         let x = sample_input(&s, fin);
-        let p = base
+        let validation = split.is_validation(&s.name);
+        let scorer = if validation || fold_models.is_empty() {
+            &base
+        } else {
+            &fold_models[fold_of(&s.name, fold_models.len())]
+        };
+        let p = scorer
             .predict_base(&s.points, &s.candidates, &x)
             .map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))?;
-        let validation = split.is_validation(&s.name);
         let rs =
             RefineSample { points: s.points, name: s.name, quads: s.candidates, labels: s.labels, base: p };
         if validation {

@@ -50,8 +50,11 @@ OPTIONS:
     --hold-out A,B,...    also hold out the samples with these names (e.g. whole
                           meshes: qm_monkey,qm_feline); each must exist in DIR. The
                           split is not stored in checkpoints: give the same
-                          --val-fraction and --hold-out when resuming
+                          --val-fraction, --hold-out and --fold when resuming
     --max-candidates M    candidates drawn per step [12000]
+    --fold I/K            also hold out fold I of K (0 <= I < K <= 16; the folds split
+                          the samples by another hash of the name): K such runs give
+                          the out-of-fold classifiers `refine --fold-models` reads
 
 AUGMENTATION (per step, from the training RNG; not stored in checkpoints, so give
 the same options when resuming):
@@ -80,6 +83,7 @@ const SPEC: Spec = Spec {
         "--val-fraction",
         "--hold-out",
         "--max-candidates",
+        "--fold",
         "--scale",
         "--jitter",
     ],
@@ -97,6 +101,8 @@ fn fnv(s: &str) -> u64 {
 pub(crate) struct Split {
     pub fraction: f64,
     pub names: Vec<String>,
+    /// `--fold I/K` (train only): samples of fold I are held out too.
+    pub fold: Option<(usize, usize)>,
 }
 
 impl Split {
@@ -118,12 +124,33 @@ impl Split {
                 names.push(n.to_string());
             }
         }
-        Ok(Split { fraction, names })
+        Ok(Split { fraction, names, fold: None })
+    }
+
+    /// `--fold I/K` of `a` into the split (train's option), checked.
+    pub(crate) fn with_fold_arg(mut self, cmd: &str, a: &Args) -> Result<Split> {
+        if let Some(v) = a.value("--fold") {
+            let bad = || {
+                Error::Usage(format!(
+                    "{cmd}: --fold {v:?}: expected I/K with 0 <= I < K <= {MAX_FOLDS}, e.g. 0/2"
+                ))
+            };
+            let (i, k) = v.split_once('/').ok_or_else(bad)?;
+            let i: usize = i.trim().parse().map_err(|_| bad())?;
+            let k: usize = k.trim().parse().map_err(|_| bad())?;
+            if !(2..=MAX_FOLDS).contains(&k) || i >= k {
+                return Err(bad());
+            }
+            self.fold = Some((i, k));
+        }
+        Ok(self)
     }
 
     /// Whether the sample called `name` is in the validation part.
     pub(crate) fn is_validation(&self, name: &str) -> bool {
-        self.names.iter().any(|n| n == name) || is_validation(name, self.fraction)
+        self.names.iter().any(|n| n == name)
+            || is_validation(name, self.fraction)
+            || self.fold.is_some_and(|(i, k)| fold_of(name, k) == i)
     }
 
     /// Error naming the `--hold-out` names that no sample of `samples` carries (a typo
@@ -147,6 +174,15 @@ impl Split {
 /// so every run (and `refine`) splits a dataset the same way.
 pub(crate) fn is_validation(name: &str, fraction: f64) -> bool {
     (fnv(name) % 10_000) as f64 / 10_000.0 < fraction
+}
+
+/// Most folds `train --fold` and `refine --fold-models` take.
+pub(crate) const MAX_FOLDS: usize = 16;
+
+/// The fold (of `k`) of the sample called `name`: a hash of the name independent of the
+/// validation hash's, so folds cut across the validation split.
+pub(crate) fn fold_of(name: &str, k: usize) -> usize {
+    ((fnv(name) >> 32) % k as u64) as usize
 }
 
 /// Every `.p2qs` sample of `dir`, by file name.
@@ -227,7 +263,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     cfg.sgd.lr = a.parsed(cmd, "--lr", cfg.sgd.lr)?;
     cfg.max_candidates = a.parsed(cmd, "--max-candidates", cfg.max_candidates)?;
     // One message per option, naming it and the value given.
-    let split = Split::from_args(cmd, &a)?;
+    let split = Split::from_args(cmd, &a)?.with_fold_arg(cmd, &a)?;
     if cfg.max_candidates == 0 {
         return Err(Error::Usage("train: --max-candidates must be positive, got 0".into()));
     }

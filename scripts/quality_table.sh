@@ -30,7 +30,7 @@ import json, sys
 rows = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
 ok = [r for r in rows if not r.get("failed")]
 keys = [("precision", "P"), ("recall", "R"), ("watertightness", "watertight"), ("manifoldness", "manifold"),
-        ("nonmanifold_vertices", "nm verts"), ("scaled_jacobian", "SJ"), ("edge_ratio", "edge ratio"),
+        ("nonmanifold_vertices", "nm verts"), ("scaled_jacobian", "SJ"), ("inverted_quads", "SJ ≤ 0"), ("edge_ratio", "edge ratio"),
         ("angle_dev_deg", "angle dev"), ("chamfer", "Chamfer")]
 print("| mesh | " + " | ".join(k[1] for k in keys) + " | GT SJ | quad only | s |")
 print("|---" * (len(keys) + 4) + "|")
@@ -42,7 +42,8 @@ for r in ok:
 n = len(ok)
 if n:
     vals = lambda k: [r["pred"][k] for r in ok]
-    cells = ["n/a" if None in vals(k) else f"{sum(vals(k)) / n:.4f}" for k, _ in keys]
+    # Means, but the count of inverted quads is a total over the meshes.
+    cells = ["n/a" if None in vals(k) else str(sum(vals(k))) if k == "inverted_quads" else f"{sum(vals(k)) / n:.4f}" for k, _ in keys]
     gsj = sum(r["gt"]["scaled_jacobian"] for r in ok) / n
     allq = all(r["pred"]["quad_only"] for r in ok)
     print(f"| **mean of {n}** | " + " | ".join(cells) + f" | {gsj:.4f} | {allq} | {sum(r['seconds'] for r in ok)/n:.1f} |")

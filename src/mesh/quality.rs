@@ -63,6 +63,9 @@ pub struct MeshMetrics {
     pub scaled_jacobian: f64,
     /// Smallest scaled Jacobian over all quads (0 without quads).
     pub scaled_jacobian_min: f64,
+    /// Quads whose scaled Jacobian is ≤ 0: inverted, folded, or with a straight or reflex
+    /// corner (degenerate quads count, their scaled Jacobian being 0).
+    pub inverted_quads: usize,
     /// Mean over non-degenerate quads of max edge length / min edge length (≥ 1).
     pub edge_ratio: f64,
     /// Mean |θ − 90°| over the corners of non-degenerate quads, in degrees. A corner
@@ -333,7 +336,7 @@ pub fn mesh_metrics(mesh: &PolyMesh) -> MeshMetrics {
     }
 
     let (mut quads, mut degenerate) = (0usize, 0usize);
-    let (mut sj_sum, mut sj_min) = (0.0, f64::INFINITY);
+    let (mut sj_sum, mut sj_min, mut inverted) = (0.0, f64::INFINITY, 0usize);
     let (mut ratio_sum, mut shaped) = (0.0, 0usize);
     let (mut dev_sum, mut dev_sq_sum) = (0.0, 0.0);
     for f in mesh.faces.iter().filter(|f| f.len() == 4) {
@@ -345,6 +348,7 @@ pub fn mesh_metrics(mesh: &PolyMesh) -> MeshMetrics {
         };
         sj_sum += shape.scaled_jacobian;
         sj_min = sj_min.min(shape.scaled_jacobian);
+        inverted += usize::from(shape.scaled_jacobian <= 0.0);
         match (shape.edge_ratio, shape.angles_deg) {
             (Some(r), Some(angles)) => {
                 shaped += 1;
@@ -374,6 +378,7 @@ pub fn mesh_metrics(mesh: &PolyMesh) -> MeshMetrics {
         degenerate_quads: degenerate,
         scaled_jacobian: mean(sj_sum, quads),
         scaled_jacobian_min: if quads == 0 { 0.0 } else { sj_min },
+        inverted_quads: inverted,
         edge_ratio: mean(ratio_sum, shaped),
         angle_dev_deg: mean(dev_sum, 4 * shaped),
         angle_rms_deg: mean(dev_sq_sum, 4 * shaped).sqrt(),
@@ -727,6 +732,38 @@ mod tests {
         }
         // A thin but real sliver (aspect 1e-6) keeps its area.
         assert!(!is_degenerate_quad(&[[0.0; 3], [1.0, 0.0, 0.0], [1.0, 1e-6, 0.0], [0.0, 1e-6, 0.0]]));
+    }
+
+    #[test]
+    fn inverted_quads_are_counted() {
+        // A square, a dart (reflex corner at vertex 6), a bowtie, a straight corner.
+        let vertices = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [3.0, 0.0, 0.0],
+            [5.0, 0.0, 0.0],
+            [3.5, 0.5, 0.0],
+            [3.0, 2.0, 0.0],
+            [6.0, 0.0, 0.0],
+            [7.0, 1.0, 0.0],
+            [7.0, 0.0, 0.0],
+            [6.0, 1.0, 0.0],
+            [8.0, 0.0, 0.0],
+            [9.0, 0.0, 0.0],
+            [10.0, 0.0, 0.0],
+            [8.0, 1.0, 0.0],
+        ];
+        let all = |faces: Vec<Vec<u32>>| mesh_metrics(&PolyMesh { vertices: vertices.clone(), faces });
+        assert_eq!(all(vec![vec![0, 1, 2, 3]]).inverted_quads, 0);
+        assert_eq!(all(vec![vec![4, 5, 6, 7]]).inverted_quads, 1);
+        assert_eq!(all(vec![vec![8, 9, 10, 11]]).inverted_quads, 1);
+        assert_eq!(all(vec![vec![12, 13, 14, 15]]).inverted_quads, 1);
+        let m = all(vec![vec![0, 1, 2, 3], vec![4, 5, 6, 7], vec![8, 9, 10, 11], vec![12, 13, 14, 15]]);
+        assert_eq!(m.inverted_quads, 3);
+        // Reversing a face's order keeps its shape: the square stays, the others stay bad.
+        assert_eq!(all(vec![vec![3, 2, 1, 0], vec![7, 6, 5, 4]]).inverted_quads, 1);
     }
 
     #[test]

@@ -108,6 +108,7 @@ fn to_json(m: &MeshMetrics, gt: Option<&GtMetrics>) -> String {
         ("edges", m.edges.to_string()),
         ("degenerate_quads", m.degenerate_quads.to_string()),
         ("scaled_jacobian_min", num(m.scaled_jacobian_min)),
+        ("inverted_quads", m.inverted_quads.to_string()),
     ];
     if let Some(g) = gt {
         fields.extend([
@@ -139,7 +140,13 @@ fn to_table(path: &str, m: &MeshMetrics, gt: Option<&GtMetrics>) -> String {
     row("non-manifold vertices", m.nonmanifold_vertices.to_string());
     row("watertightness", format!("{:.4}", m.watertightness));
     row("manifoldness", format!("{:.4}", m.manifoldness));
-    row("scaled Jacobian", format!("{:.4} mean, {:.4} min", m.scaled_jacobian, m.scaled_jacobian_min));
+    row(
+        "scaled Jacobian",
+        format!(
+            "{:.4} mean, {:.4} min, {} quads <= 0",
+            m.scaled_jacobian, m.scaled_jacobian_min, m.inverted_quads
+        ),
+    );
     row("edge ratio (max/min)", format!("{:.4} mean", m.edge_ratio));
     row("angle |θ−90°|", format!("{:.3}° mean, {:.3}° RMS", m.angle_dev_deg, m.angle_rms_deg));
     row("degenerate quads", m.degenerate_quads.to_string());

@@ -358,7 +358,7 @@ proptest! {
         faces.extend(add);
         let mut mesh = HalfedgeMesh::from_quads(g.vertices.len(), &faces).unwrap();
         let border0 = border_set(&mesh);
-        let replaced = untangle(&mut mesh, &g.vertices, &CloseConfig::default());
+        let replaced = untangle(&mut mesh, &g.vertices, &CloseConfig::default(), &|_| 0.0);
         validate(&mesh).unwrap();
         prop_assert_eq!(replaced, 2);
         prop_assert_eq!(face_keys(&mesh), face_keys(&HalfedgeMesh::from_quads(g.vertices.len(), &g.quads).unwrap()));
@@ -408,7 +408,7 @@ proptest! {
             v
         };
         let (border0, used0, n0, (min0, cost0)) = (border_set(&mesh), in_use(&mesh), mesh.n_faces(), shape(&mesh));
-        let replaced = untangle(&mut mesh, &pos, &CloseConfig::default());
+        let replaced = untangle(&mut mesh, &pos, &CloseConfig::default(), &|_| 0.0);
         validate(&mesh).unwrap();
         prop_assert_eq!(border_set(&mesh), border0);
         prop_assert_eq!(in_use(&mesh), used0);
@@ -422,5 +422,44 @@ proptest! {
         } else {
             prop_assert!(cost1 < cost0);
         }
+    }
+}
+
+/// The classifier's word wins over shape: a wrongly split pair is not re-split when the
+/// classifier believes its two faces more than the true pair, and is when it believes
+/// the true pair (or neither).
+#[test]
+fn untangle_never_trades_believed_faces_for_less_believed_ones() {
+    let n = 4;
+    let g = grid(n, n, n as f64, n as f64);
+    let (drop, add) = resplit(n, 1, 1, false, 0);
+    let mut faces: Vec<[u32; 4]> =
+        g.quads.iter().enumerate().filter(|(k, _)| !drop.contains(k)).map(|(_, q)| *q).collect();
+    faces.extend(add);
+    let key = |q: [u32; 4]| {
+        let mut k = q;
+        k.sort_unstable();
+        k
+    };
+    let wrong: Vec<[u32; 4]> = add.iter().map(|&q| key(q)).collect();
+    let right: Vec<[u32; 4]> = drop.iter().map(|&f| key(g.quads[f])).collect();
+    let truth = face_keys(&HalfedgeMesh::from_quads(g.vertices.len(), &g.quads).unwrap());
+    for (p_wrong, p_right, fixed) in
+        [(0.9f32, 0.0f32, false), (0.9, 0.4, false), (0.2, 0.3, true), (0.0, 0.0, true)]
+    {
+        let mut mesh = HalfedgeMesh::from_quads(g.vertices.len(), &faces).unwrap();
+        let support = |k: [u32; 4]| {
+            if wrong.contains(&k) {
+                p_wrong
+            } else if right.contains(&k) {
+                p_right
+            } else {
+                0.0
+            }
+        };
+        let replaced = untangle(&mut mesh, &g.vertices, &CloseConfig::default(), &support);
+        validate(&mesh).unwrap();
+        assert_eq!(replaced == 2, fixed, "p {p_wrong} / {p_right}: replaced {replaced}");
+        assert_eq!(face_keys(&mesh) == truth, fixed);
     }
 }

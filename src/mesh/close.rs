@@ -485,7 +485,8 @@ fn resplit_gain(
     pos: &[[f64; 3]],
     set: &[FaceId],
     cfg: &CloseConfig,
-) -> Option<(f64, Vec<[u32; 4]>)> {
+    support: &dyn Fn([u32; 4]) -> f32,
+) -> Option<((f64, f64), Vec<[u32; 4]>)> {
     let (vs, lp) = region_border(mesh, set)?;
     if vs.len() != 2 * set.len() + 2 {
         return None;
@@ -494,7 +495,15 @@ fn resplit_gain(
     let quads = quadrangulate(mesh, pos, &vs, &across, cfg)?;
     let new: f64 = quads.iter().map(|q| 1.0 - scaled_jacobian(&q.map(|v| pos[v as usize]))).sum();
     let old: f64 = set.iter().map(|&g| 1.0 - face_sj(mesh, pos, g)).sum();
-    (old - new > 0.0).then_some((old - new, quads))
+    let key = |q: [u32; 4]| {
+        let mut k = q;
+        k.sort_unstable();
+        k
+    };
+    let had: f64 = set.iter().map(|&g| support(key(mesh.face_vertices(g).map(|v| v.0))) as f64).sum();
+    let gets: f64 = quads.iter().map(|&q| support(key(q)) as f64).sum();
+    // Never trade faces the classifier believes for ones it believes less.
+    (old - new > 0.0 && gets >= had - 1e-6).then_some(((gets - had, old - new), quads))
 }
 
 /// Re-splits badly shaped faces with their neighbours. For each face `f` whose scaled
@@ -504,11 +513,19 @@ fn resplit_gain(
 /// region's border (one simple loop through all its corners) is split by
 /// [`quadrangulate`] into as many quads as the region has, over the same vertices and
 /// meeting its bounds (and, since chords that are edges are refused, never along the
-/// region's inner edges). The split that lowers Σ(1 − scaled Jacobian) the most replaces
-/// the region. The surface's border and vertex set do not change, so neither does its
-/// closure, and the bad face is always among those replaced. Returns the number of faces
-/// replaced.
-pub fn untangle(mesh: &mut HalfedgeMesh, pos: &[[f64; 3]], cfg: &CloseConfig) -> usize {
+/// region's inner edges). A split that lowers Σ(1 − scaled Jacobian) replaces the
+/// region, provided the classifier's support for the region's faces does not drop:
+/// `support(k)` is the probability of the candidate with sorted corners `k` (0 for faces
+/// that are no candidate, like the hole filling's), and the new quads' sum must be at
+/// least the old faces' (most support gained first, then most shape). The surface's
+/// border and vertex set do not change, so neither does its closure, and the bad face is
+/// always among those replaced. Returns the number of faces replaced.
+pub fn untangle(
+    mesh: &mut HalfedgeMesh,
+    pos: &[[f64; 3]],
+    cfg: &CloseConfig,
+    support: &dyn Fn([u32; 4]) -> f32,
+) -> usize {
     let bad: Vec<FaceId> =
         mesh.faces().filter(|&f| face_sj(mesh, pos, f) < cfg.min_scaled_jacobian).collect();
     let mut replaced = 0;
@@ -518,7 +535,7 @@ pub fn untangle(mesh: &mut HalfedgeMesh, pos: &[[f64; 3]], cfg: &CloseConfig) ->
         }
         // Every edge-connected set of at most UNTANGLE_MAX_FACES faces holding f, grown
         // one face across an edge at a time.
-        let mut best: Option<(f64, Vec<FaceId>, Vec<[u32; 4]>)> = None;
+        let mut best: Option<((f64, f64), Vec<FaceId>, Vec<[u32; 4]>)> = None;
         let mut seen: std::collections::HashSet<Vec<u32>> = std::collections::HashSet::new();
         let mut frontier: Vec<Vec<FaceId>> = vec![vec![f]];
         for _ in 1..UNTANGLE_MAX_FACES {
@@ -537,7 +554,7 @@ pub fn untangle(mesh: &mut HalfedgeMesh, pos: &[[f64; 3]], cfg: &CloseConfig) ->
                         if !seen.insert(key) {
                             continue;
                         }
-                        if let Some((gain, quads)) = resplit_gain(mesh, pos, &grown, cfg) {
+                        if let Some((gain, quads)) = resplit_gain(mesh, pos, &grown, cfg, support) {
                             if best.as_ref().map_or(true, |b| gain > b.0) {
                                 best = Some((gain, grown.clone(), quads));
                             }

@@ -477,16 +477,26 @@ fn region_border(mesh: &HalfedgeMesh, set: &[FaceId]) -> Option<(Vec<u32>, Vec<H
 /// Largest region [`untangle`] re-splits around a bad face.
 const UNTANGLE_MAX_FACES: usize = 5;
 
-/// How much re-splitting the region `set` lowers Σ(1 − scaled Jacobian), and the split,
-/// when its border is one simple loop through all its corners and [`quadrangulate`] finds
-/// a split of it into as many quads that meets the bounds and is better.
-fn resplit_gain(
+/// A re-split of a region: what it gains and its quads.
+struct Resplit {
+    /// (classifier support gained, Σ(1 − scaled Jacobian) lost), compared in that order.
+    gain: (f64, f64),
+    /// The region's faces.
+    region: Vec<FaceId>,
+    /// The quads that replace them.
+    quads: Vec<[u32; 4]>,
+}
+
+/// The re-split of the region `set` (see [`untangle`]), when its border is one simple
+/// loop through all its corners and [`quadrangulate`] finds a split of it into as many
+/// quads that meets the bounds, has better shape and no less support.
+fn resplit(
     mesh: &HalfedgeMesh,
     pos: &[[f64; 3]],
     set: &[FaceId],
     cfg: &CloseConfig,
     support: &dyn Fn([u32; 4]) -> f32,
-) -> Option<((f64, f64), Vec<[u32; 4]>)> {
+) -> Option<Resplit> {
     let (vs, lp) = region_border(mesh, set)?;
     if vs.len() != 2 * set.len() + 2 {
         return None;
@@ -503,7 +513,11 @@ fn resplit_gain(
     let had: f64 = set.iter().map(|&g| support(key(mesh.face_vertices(g).map(|v| v.0))) as f64).sum();
     let gets: f64 = quads.iter().map(|&q| support(key(q)) as f64).sum();
     // Never trade faces the classifier believes for ones it believes less.
-    (old - new > 0.0 && gets >= had - 1e-6).then_some(((gets - had, old - new), quads))
+    (old - new > 0.0 && gets >= had - 1e-6).then(|| Resplit {
+        gain: (gets - had, old - new),
+        region: set.to_vec(),
+        quads,
+    })
 }
 
 /// Re-splits badly shaped faces with their neighbours. For each face `f` whose scaled
@@ -535,7 +549,7 @@ pub fn untangle(
         }
         // Every edge-connected set of at most UNTANGLE_MAX_FACES faces holding f, grown
         // one face across an edge at a time.
-        let mut best: Option<((f64, f64), Vec<FaceId>, Vec<[u32; 4]>)> = None;
+        let mut best: Option<Resplit> = None;
         let mut seen: std::collections::HashSet<Vec<u32>> = std::collections::HashSet::new();
         let mut frontier: Vec<Vec<FaceId>> = vec![vec![f]];
         for _ in 1..UNTANGLE_MAX_FACES {
@@ -554,9 +568,9 @@ pub fn untangle(
                         if !seen.insert(key) {
                             continue;
                         }
-                        if let Some((gain, quads)) = resplit_gain(mesh, pos, &grown, cfg, support) {
-                            if best.as_ref().map_or(true, |b| gain > b.0) {
-                                best = Some((gain, grown.clone(), quads));
+                        if let Some(r) = resplit(mesh, pos, &grown, cfg, support) {
+                            if best.as_ref().map_or(true, |b| r.gain > b.gain) {
+                                best = Some(r);
                             }
                         }
                         next.push(grown);
@@ -565,7 +579,7 @@ pub fn untangle(
             }
             frontier = next;
         }
-        let Some((_, set, quads)) = best else { continue };
+        let Some(Resplit { region: set, quads, .. }) = best else { continue };
         let old: Vec<[VertexId; 4]> = set.iter().map(|&g| mesh.face_vertices(g)).collect();
         let mut removed = 0;
         while removed < set.len() && mesh.remove_face(set[removed]).is_ok() {

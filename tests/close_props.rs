@@ -3,7 +3,7 @@
 //! force, and mesh invariants (validator, border never longer) on grids with holes.
 
 use point2quad::mesh::close::{close_holes, quadrangulate, untangle, CloseConfig};
-use point2quad::mesh::halfedge::HalfedgeMesh;
+use point2quad::mesh::halfedge::{corner_set, HalfedgeMesh};
 use point2quad::mesh::handles::FaceId;
 use point2quad::mesh::rescue::{rescue_faces, RescueConfig};
 use point2quad::mesh::shapes::grid;
@@ -284,16 +284,7 @@ fn borders_of_open_surfaces_stay_open() {
 
 /// Sorted corner sets of a mesh's faces, and its boundary half-edges as (from, to).
 fn face_keys(m: &HalfedgeMesh) -> Vec<[u32; 4]> {
-    let mut v: Vec<[u32; 4]> = m
-        .faces()
-        .map(|f| {
-            let mut k = m.face_vertices(f).map(|v| v.0);
-            k.sort_unstable();
-            k
-        })
-        .collect();
-    v.sort_unstable();
-    v
+    m.corner_sets()
 }
 
 fn border_set(m: &HalfedgeMesh) -> Vec<(u32, u32)> {
@@ -436,13 +427,8 @@ fn untangle_never_trades_believed_faces_for_less_believed_ones() {
     let mut faces: Vec<[u32; 4]> =
         g.quads.iter().enumerate().filter(|(k, _)| !drop.contains(k)).map(|(_, q)| *q).collect();
     faces.extend(add);
-    let key = |q: [u32; 4]| {
-        let mut k = q;
-        k.sort_unstable();
-        k
-    };
-    let wrong: Vec<[u32; 4]> = add.iter().map(|&q| key(q)).collect();
-    let right: Vec<[u32; 4]> = drop.iter().map(|&f| key(g.quads[f])).collect();
+    let wrong: Vec<[u32; 4]> = add.iter().map(|&q| corner_set(q)).collect();
+    let right: Vec<[u32; 4]> = drop.iter().map(|&f| corner_set(g.quads[f])).collect();
     let truth = face_keys(&HalfedgeMesh::from_quads(g.vertices.len(), &g.quads).unwrap());
     for (p_wrong, p_right, fixed) in
         [(0.9f32, 0.0f32, false), (0.9, 0.4, false), (0.2, 0.3, true), (0.0, 0.0, true)]

@@ -11,7 +11,7 @@
 //!   its chords, minimising Σ(1 − scaled Jacobian) under the hole filling's shape and fold
 //!   bounds; chords that are already edges of the mesh are not used.
 
-use super::halfedge::HalfedgeMesh;
+use super::halfedge::{corner_set, HalfedgeMesh};
 use super::handles::{FaceId, HalfedgeId, VertexId};
 use super::hole_fill::{quad_normal, scaled_jacobian};
 use super::quality::is_degenerate_quad;
@@ -301,11 +301,7 @@ pub fn close_holes(mesh: &mut HalfedgeMesh, positions: &[[f64; 3]], cfg: &CloseC
 /// whose removal did not lead to a closed loop is put back and not tried again.
 fn pair_odd_loops(mesh: &mut HalfedgeMesh, pos: &[[f64; 3]], cfg: &CloseConfig, report: &mut CloseReport) {
     let mut failed: std::collections::HashSet<[u32; 4]> = std::collections::HashSet::new();
-    let key = |c: [VertexId; 4]| {
-        let mut k = c.map(|v| v.0);
-        k.sort_unstable();
-        k
-    };
+    let key = |c: [VertexId; 4]| corner_set(c.map(|v| v.0));
     for _pass in 0..16 {
         let loops = mesh.boundary_loops();
         let id = loop_ids(mesh, &loops);
@@ -505,13 +501,8 @@ fn resplit(
     let quads = quadrangulate(mesh, pos, &vs, &across, cfg)?;
     let new: f64 = quads.iter().map(|q| 1.0 - scaled_jacobian(&q.map(|v| pos[v as usize]))).sum();
     let old: f64 = set.iter().map(|&g| 1.0 - face_sj(mesh, pos, g)).sum();
-    let key = |q: [u32; 4]| {
-        let mut k = q;
-        k.sort_unstable();
-        k
-    };
-    let had: f64 = set.iter().map(|&g| support(key(mesh.face_vertices(g).map(|v| v.0))) as f64).sum();
-    let gets: f64 = quads.iter().map(|&q| support(key(q)) as f64).sum();
+    let had: f64 = set.iter().map(|&g| support(corner_set(mesh.face_vertices(g).map(|v| v.0))) as f64).sum();
+    let gets: f64 = quads.iter().map(|&q| support(corner_set(q)) as f64).sum();
     // Never trade faces the classifier believes for ones it believes less.
     (old - new > 0.0 && gets >= had - 1e-6).then(|| Resplit {
         gain: (gets - had, old - new),

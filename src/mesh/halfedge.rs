@@ -181,6 +181,14 @@ impl Batch {
     }
 }
 
+/// The corners of quad `q` sorted: the same for every cyclic start and orientation, so
+/// it names the face's vertex set (how candidates, faces and ground truth are matched).
+pub fn corner_set(q: [u32; 4]) -> [u32; 4] {
+    let mut k = q;
+    k.sort_unstable();
+    k
+}
+
 impl HalfedgeMesh {
     /// A mesh with `n_vertices` isolated vertices and no faces.
     pub fn new(n_vertices: usize) -> Self {
@@ -299,6 +307,15 @@ impl HalfedgeMesh {
     /// One half-edge of a live face.
     pub fn face_halfedge(&self, f: FaceId) -> Option<HalfedgeId> {
         self.f_he.get(f.idx()).copied().flatten()
+    }
+
+    /// Every live face's corner set (sorted corners), the list sorted: two meshes with
+    /// the same faces, whatever their order, cyclic starts or ids, give the same list.
+    pub fn corner_sets(&self) -> Vec<[u32; 4]> {
+        let mut v: Vec<[u32; 4]> =
+            self.faces().map(|f| corner_set(self.face_vertices(f).map(|v| v.0))).collect();
+        v.sort_unstable();
+        v
     }
 
     /// The live faces in index order.

@@ -493,16 +493,7 @@ mod tests {
     }
 
     fn keys(m: &HalfedgeMesh) -> Vec<[u32; 4]> {
-        let mut v: Vec<[u32; 4]> = m
-            .faces()
-            .map(|f| {
-                let mut k = m.face_vertices(f).map(|v| v.0);
-                k.sort_unstable();
-                k
-            })
-            .collect();
-        v.sort_unstable();
-        v
+        m.corner_sets()
     }
 
     #[test]

@@ -485,9 +485,7 @@ pub fn postprocess_with_reserve(
             let t = table.get_or_init(|| {
                 let mut t = std::collections::HashMap::new();
                 for (f, &p) in faces.iter().zip(probs).chain(reserve.iter().zip(reserve_probs)) {
-                    let mut k = *f;
-                    k.sort_unstable();
-                    let e = t.entry(k).or_insert(p);
+                    let e = t.entry(super::halfedge::corner_set(*f)).or_insert(p);
                     *e = e.max(p);
                 }
                 t

@@ -44,8 +44,9 @@ pub struct CloseConfig {
     /// At most this many faces are removed to join two odd loops (a path across edges).
     pub max_path_faces: usize,
     /// Whether [`untangle`] runs at the end of the post-process: a face whose scaled
-    /// Jacobian is under `min_scaled_jacobian` (inverted, folded or flat-cornered) and a
-    /// neighbour are replaced by the best other split of their six corners into two quads.
+    /// Jacobian is under `min_scaled_jacobian` (inverted, folded or flat-cornered) and up
+    /// to four faces around it are re-split over the same vertices into better-shaped
+    /// quads the classifier believes at least as much.
     pub untangle: bool,
 }
 

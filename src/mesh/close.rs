@@ -599,3 +599,54 @@ pub fn untangle(
     }
     replaced
 }
+
+/// [`untangle`] with the support read from candidate lists: `lists` holds (quads,
+/// probabilities) pairs, and a vertex set's support is the highest probability of its
+/// entries. Only candidates whose corners all lie on faces within reach of a badly shaped
+/// face (the faces a region around it can hold) are looked at, so a mesh without bad
+/// faces costs one pass over its faces.
+pub fn untangle_with_candidates(
+    mesh: &mut HalfedgeMesh,
+    pos: &[[f64; 3]],
+    cfg: &CloseConfig,
+    lists: &[(&[[u32; 4]], &[f32])],
+) -> usize {
+    let bad: Vec<FaceId> =
+        mesh.faces().filter(|&f| face_sj(mesh, pos, f) < cfg.min_scaled_jacobian).collect();
+    if bad.is_empty() {
+        return 0;
+    }
+    // Faces within UNTANGLE_MAX_FACES − 1 steps across edges of a bad face, and their corners.
+    let mut near = vec![false; mesh.n_vertices()];
+    let mut seen: std::collections::HashSet<FaceId> = bad.iter().copied().collect();
+    let mut frontier = bad;
+    for step in 0..UNTANGLE_MAX_FACES {
+        let mut next = Vec::new();
+        for &f in &frontier {
+            for v in mesh.face_vertices(f) {
+                near[v.idx()] = true;
+            }
+            if step + 1 == UNTANGLE_MAX_FACES {
+                continue;
+            }
+            for h in mesh.face_halfedges(f) {
+                if let Some(g) = mesh.face(h.opposite()) {
+                    if seen.insert(g) {
+                        next.push(g);
+                    }
+                }
+            }
+        }
+        frontier = next;
+    }
+    let mut table: std::collections::HashMap<[u32; 4], f32> = std::collections::HashMap::new();
+    for (quads, probs) in lists {
+        for (q, &p) in quads.iter().zip(probs.iter()) {
+            if q.iter().all(|&v| near.get(v as usize).copied().unwrap_or(false)) {
+                let e = table.entry(corner_set(*q)).or_insert(p);
+                *e = e.max(p);
+            }
+        }
+    }
+    untangle(mesh, pos, cfg, &|k| table.get(&k).copied().unwrap_or(0.0))
+}

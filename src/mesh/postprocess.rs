@@ -7,7 +7,7 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use super::close::{close_holes, untangle, CloseConfig, CloseReport};
+use super::close::{close_holes, untangle_with_candidates, CloseConfig, CloseReport};
 use super::halfedge::{HalfedgeMesh, InsertOutcome};
 use super::hole_fill::{fill_holes, HoleFillConfig, HoleFillReport};
 use super::poly::QuadMesh;
@@ -478,21 +478,12 @@ pub fn postprocess_with_reserve(
     // Rescued faces and removals can leave new floaters.
     report.floater_faces_removed += remove_small_open_components(&mut mesh, cfg.max_floater_faces);
     if cfg.close.enabled && cfg.close.untangle {
-        // The classifier's probability per candidate vertex set (the best of its entries),
-        // built only if some face is badly shaped.
-        let table: std::cell::OnceCell<std::collections::HashMap<[u32; 4], f32>> = std::cell::OnceCell::new();
-        let support = |k: [u32; 4]| {
-            let t = table.get_or_init(|| {
-                let mut t = std::collections::HashMap::new();
-                for (f, &p) in faces.iter().zip(probs).chain(reserve.iter().zip(reserve_probs)) {
-                    let e = t.entry(super::halfedge::corner_set(*f)).or_insert(p);
-                    *e = e.max(p);
-                }
-                t
-            });
-            t.get(&k).copied().unwrap_or(0.0)
-        };
-        report.close.untangled = untangle(&mut mesh, &pos, &cfg.close, &support);
+        report.close.untangled = untangle_with_candidates(
+            &mut mesh,
+            &pos,
+            &cfg.close,
+            &[(faces, probs), (reserve, reserve_probs)],
+        );
     }
     report.components_flipped = orient_components(&mut mesh, &pos, faces, &out);
     report.faces_out = mesh.n_faces();

@@ -2,7 +2,7 @@
 //! candidates at holes (`mesh::rescue`): the quadrangulation's optimum against brute
 //! force, and mesh invariants (validator, border never longer) on grids with holes.
 
-use point2quad::mesh::close::{close_holes, quadrangulate, untangle, CloseConfig};
+use point2quad::mesh::close::{close_holes, quadrangulate, untangle, untangle_with_candidates, CloseConfig};
 use point2quad::mesh::halfedge::{corner_set, HalfedgeMesh};
 use point2quad::mesh::handles::FaceId;
 use point2quad::mesh::rescue::{rescue_faces, RescueConfig};
@@ -447,5 +447,55 @@ fn untangle_never_trades_believed_faces_for_less_believed_ones() {
         validate(&mesh).unwrap();
         assert_eq!(replaced == 2, fixed, "p {p_wrong} / {p_right}: replaced {replaced}");
         assert_eq!(face_keys(&mesh) == truth, fixed);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
+
+    /// Reading the support from candidate lists, restricted to the candidates near bad
+    /// faces, gives the same mesh as a table of every candidate (the reference): wrong
+    /// pairs on a jittered grid, each face of the grid and of the wrong splits a candidate
+    /// with a random probability, some listed twice.
+    #[test]
+    fn untangle_with_candidates_equals_the_full_table(n in 4usize..8, seed in any::<u64>(), pairs in 1usize..5) {
+        let g = grid(n, n, n as f64, n as f64);
+        let mut rng = point2quad::rng::Rng::new(seed);
+        let mut pos = g.vertices.clone();
+        for p in pos.iter_mut() {
+            p[0] += rng.uniform(-0.1, 0.1);
+            p[1] += rng.uniform(-0.1, 0.1);
+        }
+        let mut used = vec![false; g.quads.len()];
+        let mut faces: Vec<[u32; 4]> = Vec::new();
+        let mut cands: Vec<[u32; 4]> = g.quads.clone();
+        for _ in 0..pairs {
+            let (i, j) = (rng.below(n - 1), rng.below(n - 1));
+            let (drop, add) = resplit(n, i, j, rng.below(2) == 1, rng.below(2));
+            if drop.iter().any(|&k| used[k]) {
+                continue;
+            }
+            for k in drop {
+                used[k] = true;
+            }
+            faces.extend(add);
+            cands.extend(add.map(|q| [q[1], q[2], q[3], q[0]]));
+        }
+        faces.extend(g.quads.iter().enumerate().filter(|(k, _)| !used[*k]).map(|(_, q)| *q));
+        let probs: Vec<f32> = cands.iter().map(|_| rng.uniform(0.0, 1.0) as f32).collect();
+        let (extra, extra_p): (Vec<[u32; 4]>, Vec<f32>) =
+            cands.iter().step_by(3).map(|&q| (q, rng.uniform(0.0, 1.0) as f32)).unzip();
+        let mut full: std::collections::HashMap<[u32; 4], f32> = std::collections::HashMap::new();
+        for (q, &p) in cands.iter().zip(&probs).chain(extra.iter().zip(&extra_p)) {
+            let e = full.entry(corner_set(*q)).or_insert(p);
+            *e = e.max(p);
+        }
+        let cfg = CloseConfig::default();
+        let mut a = HalfedgeMesh::from_quads(pos.len(), &faces).unwrap();
+        let mut b = HalfedgeMesh::from_quads(pos.len(), &faces).unwrap();
+        let ra = untangle(&mut a, &pos, &cfg, &|k| full.get(&k).copied().unwrap_or(0.0));
+        let rb = untangle_with_candidates(&mut b, &pos, &cfg, &[(&cands, &probs), (&extra, &extra_p)]);
+        prop_assert_eq!(ra, rb);
+        prop_assert_eq!(a.corner_sets(), b.corner_sets());
     }
 }

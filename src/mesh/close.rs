@@ -532,8 +532,23 @@ pub fn untangle(
     cfg: &CloseConfig,
     support: &dyn Fn([u32; 4]) -> f32,
 ) -> usize {
-    let bad: Vec<FaceId> =
-        mesh.faces().filter(|&f| face_sj(mesh, pos, f) < cfg.min_scaled_jacobian).collect();
+    let bad = bad_faces(mesh, pos, cfg);
+    untangle_faces(mesh, pos, cfg, bad, support)
+}
+
+/// The faces whose scaled Jacobian is under `cfg.min_scaled_jacobian`.
+fn bad_faces(mesh: &HalfedgeMesh, pos: &[[f64; 3]], cfg: &CloseConfig) -> Vec<FaceId> {
+    mesh.faces().filter(|&f| face_sj(mesh, pos, f) < cfg.min_scaled_jacobian).collect()
+}
+
+/// [`untangle`] over the bad faces `bad` (as [`bad_faces`] lists them).
+fn untangle_faces(
+    mesh: &mut HalfedgeMesh,
+    pos: &[[f64; 3]],
+    cfg: &CloseConfig,
+    bad: Vec<FaceId>,
+    support: &dyn Fn([u32; 4]) -> f32,
+) -> usize {
     let mut replaced = 0;
     for f in bad {
         if !mesh.is_face_alive(f) || face_sj(mesh, pos, f) >= cfg.min_scaled_jacobian {
@@ -611,15 +626,14 @@ pub fn untangle_with_candidates(
     cfg: &CloseConfig,
     lists: &[(&[[u32; 4]], &[f32])],
 ) -> usize {
-    let bad: Vec<FaceId> =
-        mesh.faces().filter(|&f| face_sj(mesh, pos, f) < cfg.min_scaled_jacobian).collect();
+    let bad = bad_faces(mesh, pos, cfg);
     if bad.is_empty() {
         return 0;
     }
     // Faces within UNTANGLE_MAX_FACES − 1 steps across edges of a bad face, and their corners.
     let mut near = vec![false; mesh.n_vertices()];
     let mut seen: std::collections::HashSet<FaceId> = bad.iter().copied().collect();
-    let mut frontier = bad;
+    let mut frontier = bad.clone();
     for step in 0..UNTANGLE_MAX_FACES {
         let mut next = Vec::new();
         for &f in &frontier {
@@ -648,5 +662,5 @@ pub fn untangle_with_candidates(
             }
         }
     }
-    untangle(mesh, pos, cfg, &|k| table.get(&k).copied().unwrap_or(0.0))
+    untangle_faces(mesh, pos, cfg, bad, &|k| table.get(&k).copied().unwrap_or(0.0))
 }

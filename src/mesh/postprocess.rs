@@ -9,7 +9,7 @@ use std::collections::BinaryHeap;
 
 use super::close::{close_holes, untangle_with_candidates, CloseConfig, CloseReport};
 use super::halfedge::{HalfedgeMesh, InsertOutcome};
-use super::hole_fill::{fill_holes, HoleFillConfig, HoleFillReport};
+use super::hole_fill::{fill_holes, quad_normal, HoleFillConfig, HoleFillReport};
 use super::poly::QuadMesh;
 use super::quality::is_degenerate_quad;
 use super::rescue::{remove_small_open_components, rescue_faces, RescueConfig};
@@ -250,14 +250,7 @@ pub fn support_priority(
     let nrm: Option<Vec<[f32; 3]>> = positions.map(|pos| {
         faces
             .iter()
-            .map(|q| {
-                let p = q.map(|i| pos[i as usize]);
-                crate::math::normalize(crate::math::cross(
-                    crate::math::sub(p[2], p[0]),
-                    crate::math::sub(p[3], p[1]),
-                ))
-                .map_or([0.0; 3], |n| n.map(|x| x as f32))
-            })
+            .map(|q| quad_normal(&q.map(|i| pos[i as usize])).map_or([0.0; 3], |n| n.map(|x| x as f32)))
             .collect()
     });
     let soup = FaceSoup::new(faces);

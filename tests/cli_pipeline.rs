@@ -633,3 +633,64 @@ fn dataset_bumpy_switch_changes_only_the_synthetic_geometry() {
     }
     assert!(differ >= 1, "--bumpy changed no sample");
 }
+
+/// `dataset --coarsen F` adds a coarse copy `NAME@c` of each mesh (fewer faces, same
+/// topology) after the plain samples, which stay byte for byte those of a run without
+/// it; `train` holds a copy out with its mesh (`--hold-out NAME`), and bad values are
+/// usage errors.
+#[test]
+fn dataset_coarsen_adds_coarse_copies_that_split_with_their_meshes() {
+    let s = Scratch::new("coarsen");
+    let meshes = s.p("meshes");
+    write_meshes(&meshes);
+    let (plain, coarse) = (s.p("plain"), s.p("coarse"));
+    ok(&["dataset", "--meshes", &meshes, "--out", &plain, "--seed", "3"]);
+    ok(&["dataset", "--meshes", &meshes, "--out", &coarse, "--seed", "3", "--coarsen", "0.5"]);
+    let files = |d: &str| {
+        let mut v: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.ends_with(".p2qs"))
+            .collect();
+        v.sort();
+        v
+    };
+    let (pf, cf) = (files(&plain), files(&coarse));
+    let load = |d: &str, f: &str| point2quad::pipeline::dataset::load_sample(&Path::new(d).join(f)).unwrap();
+    for f in &pf {
+        let read = |d: &str| std::fs::read(Path::new(d).join(f)).unwrap();
+        assert_eq!(read(&plain), read(&coarse), "{f}: a plain sample changed with --coarsen");
+    }
+    let copies: Vec<&String> = cf.iter().filter(|f| !pf.contains(f)).collect();
+    assert!(copies.iter().any(|f| f.as_str() == "b_torus@c.p2qs"), "{cf:?}");
+    for f in &copies {
+        let parent = f.replace("@c", "");
+        assert!(pf.contains(&parent), "{f} has no mesh sample");
+        let (c, p) = (load(&coarse, f), load(&plain, &parent));
+        assert_eq!(c.name, f.trim_end_matches(".p2qs"));
+        assert!(
+            c.gt_faces.len() < p.gt_faces.len(),
+            "{f}: {} faces, its mesh {}",
+            c.gt_faces.len(),
+            p.gt_faces.len()
+        );
+        let h = HalfedgeMesh::from_quads(c.n_mesh_vertices as usize, &c.gt_faces).unwrap();
+        let hp = HalfedgeMesh::from_quads(p.n_mesh_vertices as usize, &p.gt_faces).unwrap();
+        assert_eq!(h.euler_characteristic(), hp.euler_characteristic(), "{f}");
+    }
+    let n = cf.len();
+    let model = s.p("m.p2qm");
+    let base = ["train", "--data", &coarse, "--out", &model, "--epochs", "1", "--max-candidates", "300"];
+    let out = ok(&[&base[..], &["--val-fraction", "0", "--hold-out", "b_torus"]].concat());
+    let err = String::from_utf8_lossy(&out.stderr);
+    let want = format!("{} training / 2 validation samples", n - 2);
+    assert!(err.contains(&want), "b_torus and b_torus@c held out: want {want:?} in {err}");
+    let never = s.p("never");
+    for bad in ["0", "1", "-0.5", "nan", "x"] {
+        let err = fails(&["dataset", "--meshes", &meshes, "--out", &never, "--coarsen", bad], 2);
+        assert!(err.contains("--coarsen"), "{bad}: {err}");
+    }
+    let err = fails(&["dataset", "--synthetic", "2", "--out", &never, "--coarsen", "0.5"], 2);
+    assert!(err.contains("--meshes"), "{err}");
+    assert!(!Path::new(&never).exists());
+}

@@ -1,6 +1,7 @@
 //! Quad meshes: plain indexed meshes, the half-edge core with its validator, face soups, and the algorithms over them (post-process, hole filling, quality metrics, synthetic shapes).
 
 pub mod close;
+pub mod coarsen;
 pub mod halfedge;
 pub mod handles;
 pub mod hole_fill;

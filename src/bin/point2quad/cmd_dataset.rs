@@ -8,6 +8,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use crate::args::{Args, Spec};
 use crate::output::say;
 use point2quad::io::mesh_io::read_mesh;
+use point2quad::mesh::coarsen::{coarsen as coarsen_mesh, CoarsenConfig};
 use point2quad::mesh::poly::QuadMesh;
 use point2quad::pipeline::candidates::CandidateConfig;
 use point2quad::pipeline::dataset::{
@@ -31,6 +32,12 @@ OPTIONS:
                       to ~30 degrees between neighbouring faces, as coarse organic
                       meshes do (an experiment: not in the shipped weights' recipe)
     --meshes DIR      every .obj/.off/.ply file directly in DIR (sorted by name)
+    --coarsen F       also a coarse copy of each mesh of --meshes, sample NAME@c:
+                      random chords (strips of quads) collapsed until at most F of
+                      its faces are left (0 < F < 1, e.g. 0.25), so it bends more
+                      from face to face, as coarse meshes of organic shapes do.
+                      `train`/`refine` split, fold and hold out NAME@c with NAME.
+                      A mesh no chord of which can be collapsed gets no copy
     --noise F         noise points per mesh vertex (default 0.1; at most 100)
     --offset F        largest noise offset along the face normal, as a fraction of
                       the face's mean edge length (default 0.1; at most 100)
@@ -58,12 +65,14 @@ enum Job {
     Synthetic(usize),
     /// A mesh file and the sample name to use for it.
     File(PathBuf, String),
+    /// A mesh file, coarsened by `--coarsen`, and the sample name (`NAME@c`).
+    Coarse(PathBuf, String),
 }
 
 pub fn run(argv: &[String]) -> Result<()> {
     const CMD: &str = "dataset";
     let spec = Spec {
-        valued: &["--out", "--synthetic", "--meshes", "--noise", "--offset", "--seed"],
+        valued: &["--out", "--synthetic", "--meshes", "--noise", "--offset", "--seed", "--coarsen"],
         switches: &["--bumpy"],
     };
     let args = Args::parse(CMD, argv, &spec)?;
@@ -84,6 +93,23 @@ pub fn run(argv: &[String]) -> Result<()> {
         "about a second of work and a file per sample",
     )?;
     let seed: u64 = args.parsed(CMD, "--seed", 0)?;
+    let coarsen: Option<f64> = match args.value("--coarsen") {
+        None => None,
+        Some(_) => {
+            let f: f64 = args.parsed(CMD, "--coarsen", 0.25)?;
+            if !(f > 0.0 && f < 1.0) {
+                return Err(Error::Usage(format!(
+                    "{CMD}: --coarsen must be a share of the faces, 0 < F < 1, got {f}"
+                )));
+            }
+            if args.value("--meshes").is_none() {
+                return Err(Error::Usage(format!(
+                    "{CMD}: --coarsen needs --meshes DIR (it coarsens those meshes)"
+                )));
+            }
+            Some(f)
+        }
+    };
     let noise = NoiseConfig {
         fraction: args.parsed(CMD, "--noise", NoiseConfig::default().fraction)?,
         offset: args.parsed(CMD, "--offset", NoiseConfig::default().offset)?,
@@ -115,6 +141,18 @@ pub fn run(argv: &[String]) -> Result<()> {
             };
             jobs.push(Job::File(path.clone(), name));
         }
+        // After every plain job, so each of those keeps its index, hence its random
+        // stream and its bytes, with or without --coarsen.
+        if coarsen.is_some() {
+            let plain: Vec<(PathBuf, String)> = jobs
+                .iter()
+                .filter_map(|j| match j {
+                    Job::File(p, n) => Some((p.clone(), format!("{n}@c"))),
+                    _ => None,
+                })
+                .collect();
+            jobs.extend(plain.into_iter().map(|(p, n)| Job::Coarse(p, n)));
+        }
     }
     if jobs.is_empty() {
         return Err(Error::Usage(format!(
@@ -137,6 +175,25 @@ pub fn run(argv: &[String]) -> Result<()> {
                     return Ok(None);
                 }
             },
+            Job::Coarse(path, name) => {
+                let mesh = match load_quads(path) {
+                    Ok(mesh) => mesh,
+                    Err(msg) => {
+                        let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                        say!("[{n}/{total}] warning: skipping {msg}");
+                        return Ok(None);
+                    }
+                };
+                let mut rng = sample_rng(seed, k);
+                let cfg = CoarsenConfig { face_fraction: coarsen.unwrap_or(0.25), ..Default::default() };
+                let coarse = coarsen_mesh(&mesh, &cfg, &mut rng);
+                if coarse.quads.len() == mesh.quads.len() {
+                    let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                    say!("[{n}/{total}] {name}: no chord could be collapsed (or the mesh is not a valid manifold); no sample");
+                    return Ok(None);
+                }
+                (name.clone(), coarse, rng)
+            }
         };
         let sample = build_sample(&name, &mesh, &noise, &cand_cfg, &mut rng)?;
         let file = format!("{name}.{EXTENSION}");

@@ -2,7 +2,7 @@
 //! the classifier's own probabilities over a dataset (the classifier stays frozen).
 
 use crate::args::{Args, Spec};
-use crate::cmd_train::{fold_of, load_dir, Split, MAX_FOLDS};
+use crate::cmd_train::{fold_of, load_dir, parent_name, Split, MAX_FOLDS};
 use crate::output::say;
 use point2quad::nn::checkpoint;
 use point2quad::pipeline::model::{Model, MAX_REFINE_ROUNDS};
@@ -157,7 +157,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         let scorer = if validation || fold_models.is_empty() {
             &base
         } else {
-            &fold_models[fold_of(&s.name, fold_models.len())]
+            &fold_models[fold_of(parent_name(&s.name), fold_models.len())]
         };
         let p = scorer
             .predict_base(&s.points, &s.candidates, &x)

@@ -146,11 +146,15 @@ impl Split {
         Ok(self)
     }
 
-    /// Whether the sample called `name` is in the validation part.
+    /// Whether the sample called `name` is in the validation part. A sample derived from
+    /// a mesh (`NAME@c`, `dataset --coarsen`) goes wherever its mesh's sample `NAME`
+    /// goes: the hash, the fold and `--hold-out` read the part before the `@`, so a
+    /// held-out mesh is never trained on in another form.
     pub(crate) fn is_validation(&self, name: &str) -> bool {
-        self.names.iter().any(|n| n == name)
-            || is_validation(name, self.fraction)
-            || self.fold.is_some_and(|(i, k)| fold_of(name, k) == i)
+        let parent = parent_name(name);
+        self.names.iter().any(|n| n == name || n == parent)
+            || is_validation(parent, self.fraction)
+            || self.fold.is_some_and(|(i, k)| fold_of(parent, k) == i)
     }
 
     /// Error naming the `--hold-out` names that no sample of `samples` carries (a typo
@@ -168,6 +172,12 @@ impl Split {
             )))
         }
     }
+}
+
+/// The mesh a sample was made from: the name up to the first `@` (sample names of
+/// `dataset` never hold one otherwise: file stems are sanitised to `[A-Za-z0-9._-]`).
+pub(crate) fn parent_name(name: &str) -> &str {
+    name.split('@').next().unwrap_or(name)
 }
 
 /// Whether the sample called `name` is in the validation part: by a hash of the name,

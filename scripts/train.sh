@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # make train: the recipe behind fixtures/point2quad-default.p2qm.
 # Data: 80 synthetic shapes (seed 7) + every mesh of ../shared/data/quads/train when
-# present (never eval/ or large/), 10% noise points; then 40 epochs of the default
+# present (never eval/ or large/) and a coarse copy of each (--coarsen 0.5: chords
+# collapsed until at most half the faces are left; session 10), 10% noise points;
+# then 40 epochs of the default
 # preset reading the point normals without their signs (--sign-free-normals, session 8),
 # seed 0. HOLD_OUT=a,b,c holds those samples out of training and refinement too
 # (beside the hashed validation split), to judge a recipe on meshes it never saw; the
@@ -16,7 +18,7 @@ DATA=out/train/data; MODEL=out/train/model.p2qm; REFINED=out/train/refined.p2qm
 mkdir -p out/train
 if [ ! -f "$DATA/index.txt" ]; then
   MESHES=()
-  if [ -d ../shared/data/quads/train ]; then MESHES=(--meshes ../shared/data/quads/train);
+  if [ -d ../shared/data/quads/train ]; then MESHES=(--meshes ../shared/data/quads/train --coarsen 0.5);
   else echo "train: ../shared/data/quads/train not found: synthetic data only"; fi
   rm -rf "$DATA"
   "$BIN" dataset --out "$DATA" --synthetic 80 "${MESHES[@]}" --noise 0.1 --seed 7

@@ -685,8 +685,42 @@ fn dataset_coarsen_adds_coarse_copies_that_split_with_their_meshes() {
     let err = String::from_utf8_lossy(&out.stderr);
     let want = format!("{} training / 2 validation samples", n - 2);
     assert!(err.contains(&want), "b_torus and b_torus@c held out: want {want:?} in {err}");
+    // A second share adds NAME@c2 copies; the first share's copies stay as they were.
+    let two = s.p("two");
+    ok(&["dataset", "--meshes", &meshes, "--out", &two, "--seed", "3", "--coarsen", "0.5,0.3"]);
+    let tf = files(&two);
+    for f in &cf {
+        let read = |d: &str| std::fs::read(Path::new(d).join(f)).unwrap();
+        assert_eq!(read(&coarse), read(&two), "{f}: changed by a second share");
+    }
+    let seconds: Vec<&String> = tf.iter().filter(|f| f.contains("@c2.")).collect();
+    assert!(seconds.iter().any(|f| f.as_str() == "b_torus@c2.p2qs"), "{tf:?}");
+    assert_eq!(tf.len(), cf.len() + seconds.len(), "{tf:?}");
+    for f in &seconds {
+        let (c2, c1) = (load(&two, f), load(&two, &f.replace("@c2", "@c")));
+        assert!(c2.gt_faces.len() < c1.gt_faces.len(), "{f}: 0.3 of the faces should be fewer than 0.5");
+    }
+    let model2 = s.p("m2.p2qm");
+    let out = ok(&[
+        "train",
+        "--data",
+        &two,
+        "--out",
+        &model2,
+        "--epochs",
+        "1",
+        "--max-candidates",
+        "300",
+        "--val-fraction",
+        "0",
+        "--hold-out",
+        "b_torus",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    let want = format!("{} training / 3 validation samples", tf.len() - 3);
+    assert!(err.contains(&want), "b_torus and both copies held out: want {want:?} in {err}");
     let never = s.p("never");
-    for bad in ["0", "1", "-0.5", "nan", "x"] {
+    for bad in ["0", "1", "-0.5", "nan", "x", "0.5,,0.3", "0.5,2", "0.9,0.8,0.7,0.6,0.5,0.4,0.3,0.2,0.1"] {
         let err = fails(&["dataset", "--meshes", &meshes, "--out", &never, "--coarsen", bad], 2);
         assert!(err.contains("--coarsen"), "{bad}: {err}");
     }

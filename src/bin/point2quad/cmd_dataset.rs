@@ -32,12 +32,15 @@ OPTIONS:
                       to ~30 degrees between neighbouring faces, as coarse organic
                       meshes do (an experiment: not in the shipped weights' recipe)
     --meshes DIR      every .obj/.off/.ply file directly in DIR (sorted by name)
-    --coarsen F       also a coarse copy of each mesh of --meshes, sample NAME@c:
+    --coarsen F[,F2,...]
+                      also a coarse copy of each mesh of --meshes, sample NAME@c:
                       random chords (strips of quads) collapsed until at most F of
-                      its faces are left (0 < F < 1, e.g. 0.25), so it bends more
-                      from face to face, as coarse meshes of organic shapes do.
-                      `train`/`refine` split, fold and hold out NAME@c with NAME.
-                      A mesh no chord of which can be collapsed gets no copy
+                      its faces are left (0 < F < 1, e.g. 0.5), so it bends more
+                      from face to face, as coarse meshes of organic shapes do;
+                      each further share adds copies NAME@c2, NAME@c3, ... (at
+                      most 8 shares). `train`/`refine` split, fold and hold out
+                      every NAME@... with NAME. A mesh no chord of which can be
+                      collapsed gets no copy
     --noise F         noise points per mesh vertex (default 0.1; at most 100)
     --offset F        largest noise offset along the face normal, as a fraction of
                       the face's mean edge length (default 0.1; at most 100)
@@ -60,13 +63,17 @@ const MAX_SYNTHETIC: usize = 100_000;
 /// offsets of a hundred edges, are no longer a noisy surface.
 const MAX_NOISE: f64 = 100.0;
 
+/// Most shares `--coarsen` takes (each adds a copy of every mesh).
+const MAX_COARSE_COPIES: usize = 8;
+
 /// Where a sample comes from.
 enum Job {
     Synthetic(usize),
     /// A mesh file and the sample name to use for it.
     File(PathBuf, String),
-    /// A mesh file, coarsened by `--coarsen`, and the sample name (`NAME@c`).
-    Coarse(PathBuf, String),
+    /// A mesh file, coarsened to this share of its faces by `--coarsen`, and the
+    /// sample name (`NAME@c`, `NAME@c2`, ...).
+    Coarse(PathBuf, String, f64),
 }
 
 pub fn run(argv: &[String]) -> Result<()> {
@@ -93,13 +100,25 @@ pub fn run(argv: &[String]) -> Result<()> {
         "about a second of work and a file per sample",
     )?;
     let seed: u64 = args.parsed(CMD, "--seed", 0)?;
-    let coarsen: Option<f64> = match args.value("--coarsen") {
-        None => None,
-        Some(_) => {
-            let f: f64 = args.parsed(CMD, "--coarsen", 0.25)?;
-            if !(f > 0.0 && f < 1.0) {
+    let coarsen: Vec<f64> = match args.value("--coarsen") {
+        None => Vec::new(),
+        Some(v) => {
+            let mut shares = Vec::new();
+            for part in v.split(',') {
+                let f: f64 = part.trim().parse().map_err(|_| {
+                    Error::Usage(format!("{CMD}: --coarsen {v:?}: cannot parse {part:?} as a number"))
+                })?;
+                if !(f > 0.0 && f < 1.0) {
+                    return Err(Error::Usage(format!(
+                        "{CMD}: --coarsen must be shares of the faces, 0 < F < 1, got {part}"
+                    )));
+                }
+                shares.push(f);
+            }
+            if shares.len() > MAX_COARSE_COPIES {
                 return Err(Error::Usage(format!(
-                    "{CMD}: --coarsen must be a share of the faces, 0 < F < 1, got {f}"
+                    "{CMD}: --coarsen takes at most {MAX_COARSE_COPIES} shares, got {}",
+                    shares.len()
                 )));
             }
             if args.value("--meshes").is_none() {
@@ -107,7 +126,7 @@ pub fn run(argv: &[String]) -> Result<()> {
                     "{CMD}: --coarsen needs --meshes DIR (it coarsens those meshes)"
                 )));
             }
-            Some(f)
+            shares
         }
     };
     let noise = NoiseConfig {
@@ -143,15 +162,18 @@ pub fn run(argv: &[String]) -> Result<()> {
         }
         // After every plain job, so each of those keeps its index, hence its random
         // stream and its bytes, with or without --coarsen.
-        if coarsen.is_some() {
-            let plain: Vec<(PathBuf, String)> = jobs
-                .iter()
-                .filter_map(|j| match j {
-                    Job::File(p, n) => Some((p.clone(), format!("{n}@c"))),
-                    _ => None,
-                })
-                .collect();
-            jobs.extend(plain.into_iter().map(|(p, n)| Job::Coarse(p, n)));
+        // The copies of each share after those of the shares before it, for the same
+        // reason: `--coarsen 0.5,0.25` repeats the samples of `--coarsen 0.5`.
+        let plain: Vec<(PathBuf, String)> = jobs
+            .iter()
+            .filter_map(|j| match j {
+                Job::File(p, n) => Some((p.clone(), n.clone())),
+                _ => None,
+            })
+            .collect();
+        for (i, &share) in coarsen.iter().enumerate() {
+            let suffix = if i == 0 { "@c".to_string() } else { format!("@c{}", i + 1) };
+            jobs.extend(plain.iter().map(|(p, n)| Job::Coarse(p.clone(), format!("{n}{suffix}"), share)));
         }
     }
     if jobs.is_empty() {
@@ -175,7 +197,7 @@ pub fn run(argv: &[String]) -> Result<()> {
                     return Ok(None);
                 }
             },
-            Job::Coarse(path, name) => {
+            Job::Coarse(path, name, share) => {
                 let mesh = match load_quads(path) {
                     Ok(mesh) => mesh,
                     Err(msg) => {
@@ -185,7 +207,7 @@ pub fn run(argv: &[String]) -> Result<()> {
                     }
                 };
                 let mut rng = sample_rng(seed, k);
-                let cfg = CoarsenConfig { face_fraction: coarsen.unwrap_or(0.25), ..Default::default() };
+                let cfg = CoarsenConfig { face_fraction: *share, ..Default::default() };
                 let coarse = coarsen_mesh(&mesh, &cfg, &mut rng);
                 if coarse.quads.len() == mesh.quads.len() {
                     let n = done.fetch_add(1, Ordering::Relaxed) + 1;

@@ -45,6 +45,17 @@ fn fails(args: &[&str], code: i32) -> String {
     err
 }
 
+/// The `.p2qs` file names in `dir`, sorted.
+fn sample_files(dir: &str) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".p2qs"))
+        .collect();
+    v.sort();
+    v
+}
+
 /// Writes three small quad meshes into `dir`.
 fn write_meshes(dir: &str) {
     std::fs::create_dir_all(dir).unwrap();
@@ -613,15 +624,7 @@ fn dataset_bumpy_switch_changes_only_the_synthetic_geometry() {
     ok(&["dataset", "--out", &plain, "--synthetic", "4", "--seed", "7"]);
     ok(&["dataset", "--out", &bumpy, "--synthetic", "4", "--seed", "7", "--bumpy"]);
     ok(&["dataset", "--out", &again, "--synthetic", "4", "--seed", "7"]);
-    let files = |d: &str| {
-        let mut v: Vec<String> = std::fs::read_dir(d)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .filter(|n| n.ends_with(".p2qs"))
-            .collect();
-        v.sort();
-        v
-    };
+    let files = sample_files;
     assert_eq!(files(&plain), files(&bumpy));
     let mut differ = 0;
     for f in files(&plain) {
@@ -646,15 +649,7 @@ fn dataset_coarsen_adds_coarse_copies_that_split_with_their_meshes() {
     let (plain, coarse) = (s.p("plain"), s.p("coarse"));
     ok(&["dataset", "--meshes", &meshes, "--out", &plain, "--seed", "3"]);
     ok(&["dataset", "--meshes", &meshes, "--out", &coarse, "--seed", "3", "--coarsen", "0.5"]);
-    let files = |d: &str| {
-        let mut v: Vec<String> = std::fs::read_dir(d)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .filter(|n| n.ends_with(".p2qs"))
-            .collect();
-        v.sort();
-        v
-    };
+    let files = sample_files;
     let (pf, cf) = (files(&plain), files(&coarse));
     let load = |d: &str, f: &str| point2quad::pipeline::dataset::load_sample(&Path::new(d).join(f)).unwrap();
     for f in &pf {

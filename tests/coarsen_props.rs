@@ -127,19 +127,20 @@ fn a_torus_grid_reaches_the_target_share_of_faces() {
 
 #[test]
 fn a_non_manifold_input_comes_back_unchanged() {
-    // Three quads on the edge 0–1.
-    let vertices = vec![
-        [0.0, 0.0, 0.0],
-        [1.0, 0.0, 0.0],
-        [1.0, 1.0, 0.0],
-        [0.0, 1.0, 0.0],
-        [1.0, -1.0, 0.0],
-        [0.0, -1.0, 0.0],
-        [1.0, 0.0, 1.0],
-        [0.0, 0.0, 1.0],
-    ];
-    let quads = vec![[0, 1, 2, 3], [1, 0, 5, 4], [0, 1, 6, 7]];
+    // Three flaps hinged on the edge 0–1 (x axis), at 0°, 120° and 240° around it. A
+    // strip across one flap alone would collapse (and leave a valid two-flap mesh), so
+    // only the validity check of the input keeps it unchanged.
+    let mut vertices = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
+    let mut quads = Vec::new();
+    for k in 0..3u32 {
+        let a = f64::from(k) * 2.0 * std::f64::consts::PI / 3.0;
+        let (y, z) = (a.cos(), a.sin());
+        vertices.push([1.0, y, z]);
+        vertices.push([0.0, y, z]);
+        quads.push([0, 1, 2 + 2 * k, 3 + 2 * k]);
+    }
     let m = QuadMesh { vertices, quads };
+    assert!(HalfedgeMesh::from_quads(m.vertices.len(), &m.quads).is_err());
     assert_eq!(coarsen(&m, &CoarsenConfig::default(), &mut Rng::new(0)), m);
 }
 

@@ -40,7 +40,7 @@ OPTIONS:
                       each further share adds copies NAME@c2, NAME@c3, ... (at
                       most 8 shares). `train`/`refine` split, fold and hold out
                       every NAME@... with NAME. A mesh no chord of which can be
-                      collapsed gets no copy
+                      collapsed gets no copy. `make train` uses 0.5
     --noise F         noise points per mesh vertex (default 0.1; at most 100)
     --offset F        largest noise offset along the face normal, as a fraction of
                       the face's mean edge length (default 0.1; at most 100)

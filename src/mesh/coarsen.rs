@@ -16,7 +16,7 @@
 //! collapse that would break the manifold (checked by [`validate`]), leave an inner
 //! vertex with fewer than three faces, or bend a face it changes out of shape.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use super::halfedge::HalfedgeMesh;
 use super::poly::QuadMesh;
@@ -88,10 +88,13 @@ pub fn edge_map(quads: &[[u32; 4]]) -> EdgeMap {
 /// side) pairs: the side is one of the two rungs of that face (the other is side + 2).
 /// `None` when the chord crosses itself (visits a face twice other than by closing), or
 /// meets a non-manifold edge.
+///
+/// # Panics
+/// If `f` is not a face of `quads`, or `edges` is not `quads`' [`edge_map`].
 pub fn chord(quads: &[[u32; 4]], edges: &EdgeMap, f: usize, side: usize) -> Option<Vec<(usize, usize)>> {
     let side = side % 4;
-    let mut seen: HashMap<usize, ()> = HashMap::new();
-    seen.insert(f, ());
+    let mut seen: HashSet<usize> = HashSet::new();
+    seen.insert(f);
     let mut forward = vec![(f, side)];
     // Walks from (face, exit side) across the rungs; returns whether it came back to `f`
     // through `side` (a closed chord).
@@ -110,7 +113,7 @@ pub fn chord(quads: &[[u32; 4]], edges: &EdgeMap, f: usize, side: usize) -> Opti
             if h == f {
                 return if t == side || t == (side + 2) % 4 { Some(true) } else { None };
             }
-            if seen.insert(h, ()).is_some() {
+            if !seen.insert(h) {
                 return None;
             }
             out.push((h, t));

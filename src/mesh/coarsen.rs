@@ -19,10 +19,11 @@
 use std::collections::{HashMap, HashSet};
 
 use super::halfedge::HalfedgeMesh;
+use super::hole_fill::quad_normal;
 use super::poly::QuadMesh;
 use super::quality::quad_shape;
 use super::validate::validate;
-use crate::math::{cross, dot, normalize, sub};
+use crate::math::{dot, norm, sub};
 use crate::rng::Rng;
 
 /// Settings of [`coarsen`].
@@ -208,8 +209,7 @@ pub fn collapse(
             if sa < cfg.min_scaled_jacobian.min(sb) {
                 return None;
             }
-            let n = |p: [[f64; 3]; 4]| normalize(cross(sub(p[2], p[0]), sub(p[3], p[1])));
-            match (n(before), n(after)) {
+            match (quad_normal(&before), quad_normal(&after)) {
                 (Some(nb), Some(na)) if dot(nb, na) >= cfg.min_normal_dot => {}
                 _ => return None,
             }
@@ -298,7 +298,7 @@ pub fn coarsen(mesh: &QuadMesh, cfg: &CoarsenConfig, rng: &mut Rng) -> QuadMesh 
 /// Mean over the chord's faces of (rung + rung) / (side + side): above 1 the strip's
 /// faces are longer across it than along it.
 pub fn aspect(pos: &[[f64; 3]], quads: &[[u32; 4]], ch: &[(usize, usize)]) -> f64 {
-    let len = |a: u32, b: u32| crate::math::norm(sub(pos[a as usize], pos[b as usize]));
+    let len = |a: u32, b: u32| norm(sub(pos[a as usize], pos[b as usize]));
     let mut sum = 0.0;
     for &(f, s) in ch {
         let q = quads[f];

@@ -189,15 +189,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let results: Vec<Result<Option<String>>> = par::map(total, |k| {
         let (name, mesh, mut rng) = match &jobs[k] {
             Job::Synthetic(i) => synthetic_mesh(seed, *i, bumpy),
-            Job::File(path, name) => match load_quads(path) {
-                Ok(mesh) => (name.clone(), mesh, sample_rng(seed, k)),
-                Err(msg) => {
-                    let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-                    say!("[{n}/{total}] warning: skipping {msg}");
-                    return Ok(None);
-                }
-            },
-            Job::Coarse(path, name, share) => {
+            Job::File(path, name) | Job::Coarse(path, name, _) => {
                 let mesh = match load_quads(path) {
                     Ok(mesh) => mesh,
                     Err(msg) => {
@@ -207,14 +199,20 @@ pub fn run(argv: &[String]) -> Result<()> {
                     }
                 };
                 let mut rng = sample_rng(seed, k);
-                let cfg = CoarsenConfig { face_fraction: *share, ..Default::default() };
-                let coarse = coarsen_mesh(&mesh, &cfg, &mut rng);
-                if coarse.quads.len() == mesh.quads.len() {
-                    let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-                    say!("[{n}/{total}] {name}: no chord could be collapsed (or the mesh is not a valid manifold); no sample");
-                    return Ok(None);
-                }
-                (name.clone(), coarse, rng)
+                let mesh = match &jobs[k] {
+                    Job::Coarse(_, _, share) => {
+                        let cfg = CoarsenConfig { face_fraction: *share, ..Default::default() };
+                        let coarse = coarsen_mesh(&mesh, &cfg, &mut rng);
+                        if coarse.quads.len() == mesh.quads.len() {
+                            let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                            say!("[{n}/{total}] {name}: no chord could be collapsed (or the mesh is not a valid manifold); no sample");
+                            return Ok(None);
+                        }
+                        coarse
+                    }
+                    _ => mesh,
+                };
+                (name.clone(), mesh, rng)
             }
         };
         let sample = build_sample(&name, &mesh, &noise, &cand_cfg, &mut rng)?;

@@ -723,3 +723,84 @@ fn dataset_coarsen_adds_coarse_copies_that_split_with_their_meshes() {
     assert!(err.contains("--meshes"), "{err}");
     assert!(!Path::new(&never).exists());
 }
+
+/// `dataset --stretch F` adds a stretched copy `NAME@s` of each mesh (same faces, edge
+/// lengths changed by up to F between directions) after the plain samples and the
+/// coarse copies, all of which stay byte for byte as without it; a copy is held out
+/// with its mesh, and bad values are usage errors.
+#[test]
+fn dataset_stretch_adds_stretched_copies_that_split_with_their_meshes() {
+    let s = Scratch::new("stretch");
+    let meshes = s.p("meshes");
+    write_meshes(&meshes);
+    let (coarse, both) = (s.p("coarse"), s.p("both"));
+    ok(&["dataset", "--meshes", &meshes, "--out", &coarse, "--seed", "3", "--coarsen", "0.5"]);
+    ok(&[
+        "dataset",
+        "--meshes",
+        &meshes,
+        "--out",
+        &both,
+        "--seed",
+        "3",
+        "--coarsen",
+        "0.5",
+        "--stretch",
+        "2",
+    ]);
+    let (cf, bf) = (sample_files(&coarse), sample_files(&both));
+    for f in &cf {
+        let read = |d: &str| std::fs::read(Path::new(d).join(f)).unwrap();
+        assert_eq!(read(&coarse), read(&both), "{f}: changed by --stretch");
+    }
+    let copies: Vec<&String> = bf.iter().filter(|f| f.contains("@s.")).collect();
+    assert_eq!(bf.len(), cf.len() + copies.len(), "{bf:?}");
+    assert!(copies.iter().any(|f| f.as_str() == "b_torus@s.p2qs"), "{bf:?}");
+    let load = |d: &str, f: &str| point2quad::pipeline::dataset::load_sample(&Path::new(d).join(f)).unwrap();
+    for f in &copies {
+        let (c, p) = (load(&both, f), load(&both, &f.replace("@s", "")));
+        assert_eq!(c.gt_faces, p.gt_faces, "{f}: the faces must not change");
+        assert_eq!(c.n_mesh_vertices, p.n_mesh_vertices);
+        // Edge length ratios copy / mesh (both in their normalised frames, so up to one
+        // scale): spread by the stretch, but by at most its largest factor.
+        let len = |pts: &[[f32; 3]], a: u32, b: u32| {
+            let (x, y) = (pts[a as usize], pts[b as usize]);
+            ((x[0] - y[0]).powi(2) + (x[1] - y[1]).powi(2) + (x[2] - y[2]).powi(2)).sqrt()
+        };
+        let ratios: Vec<f32> = p
+            .gt_faces
+            .iter()
+            .flat_map(|q| (0..4).map(move |i| (q[i], q[(i + 1) % 4])))
+            .map(|(a, b)| len(&c.points, a, b) / len(&p.points, a, b))
+            .collect();
+        let (lo, hi) = ratios.iter().fold((f32::MAX, 0.0f32), |(l, h), &r| (l.min(r), h.max(r)));
+        assert!(hi / lo > 1.001 && hi / lo <= 2.0 + 1e-3, "{f}: edge ratios {lo}..{hi}");
+    }
+    let model = s.p("m.p2qm");
+    let out = ok(&[
+        "train",
+        "--data",
+        &both,
+        "--out",
+        &model,
+        "--epochs",
+        "1",
+        "--max-candidates",
+        "300",
+        "--val-fraction",
+        "0",
+        "--hold-out",
+        "b_torus",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    let want = format!("{} training / 3 validation samples", bf.len() - 3);
+    assert!(err.contains(&want), "b_torus, b_torus@c and b_torus@s held out: want {want:?} in {err}");
+    let never = s.p("never");
+    for bad in ["1", "0.5", "10.5", "nan", "x", "2,,3", "2,2,2,2,2,2,2,2,2"] {
+        let err = fails(&["dataset", "--meshes", &meshes, "--out", &never, "--stretch", bad], 2);
+        assert!(err.contains("--stretch"), "{bad}: {err}");
+    }
+    let err = fails(&["dataset", "--synthetic", "2", "--out", &never, "--stretch", "2"], 2);
+    assert!(err.contains("--meshes"), "{err}");
+    assert!(!Path::new(&never).exists());
+}

@@ -8,12 +8,58 @@ use std::process::Command;
 use point2quad::mesh::shapes;
 use point2quad::pipeline::candidates::{generate, CandidateConfig};
 use point2quad::pipeline::dataset::{
-    build_sample, encode_sample, label_candidates, load_sample, read_sample,
+    build_sample, encode_sample, label_candidates, load_sample, read_sample, stretch_mesh,
 };
 use point2quad::pipeline::features::{face_input, CONTEXT_DIM, F_INFO_DIM};
 use point2quad::pipeline::frame::Frame;
 use point2quad::pipeline::noise::{noise_points, NoiseConfig};
 use point2quad::rng::Rng;
+use proptest::prelude::*;
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// `stretch_mesh` keeps the faces and stretches along one axis: for every pair of
+    /// vertices, |Δ'|² = |Δ|² + (f² − 1)(Δ·a)² (the reference), with |a| = 1 and
+    /// 1 ≤ f ≤ the largest factor; the same seed gives the same copy.
+    #[test]
+    fn stretch_mesh_stretches_along_one_axis(seed in any::<u64>(), max in 1.0f64..10.0, which in 0usize..3) {
+        let mesh = match which {
+            0 => shapes::torus(10, 6, 1.0, 0.4),
+            1 => shapes::cube_sphere(3),
+            _ => shapes::random_pose(&shapes::torus(8, 5, 2.0, 0.5), &mut Rng::new(seed ^ 1)),
+        };
+        let (out, a, f) = stretch_mesh(&mesh, max, &mut Rng::new(seed)).unwrap();
+        prop_assert_eq!(&out.quads, &mesh.quads);
+        prop_assert_eq!(out.vertices.len(), mesh.vertices.len());
+        prop_assert!(((a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt() - 1.0).abs() < 1e-12);
+        prop_assert!((1.0..=max).contains(&f), "factor {} outside [1, {}]", f, max);
+        let n = mesh.vertices.len();
+        for i in (0..n).step_by(7) {
+            for j in (i + 1..n).step_by(5) {
+                let d: [f64; 3] = std::array::from_fn(|k| mesh.vertices[j][k] - mesh.vertices[i][k]);
+                let e: [f64; 3] = std::array::from_fn(|k| out.vertices[j][k] - out.vertices[i][k]);
+                let along = d[0] * a[0] + d[1] * a[1] + d[2] * a[2];
+                let want = d.iter().map(|x| x * x).sum::<f64>() + (f * f - 1.0) * along * along;
+                let got = e.iter().map(|x| x * x).sum::<f64>();
+                prop_assert!((got - want).abs() <= 1e-9 * (1.0 + want), "{} vs {}", got, want);
+            }
+        }
+        let again = stretch_mesh(&mesh, max, &mut Rng::new(seed)).unwrap();
+        prop_assert_eq!(again.0, out);
+    }
+}
+
+#[test]
+fn stretch_mesh_rejects_bad_factors() {
+    let mesh = shapes::cube_sphere(2);
+    for bad in [0.5, 0.0, -2.0, f64::NAN, f64::INFINITY] {
+        assert!(stretch_mesh(&mesh, bad, &mut Rng::new(1)).is_err(), "{bad}");
+    }
+    let (same, _, f) = stretch_mesh(&mesh, 1.0, &mut Rng::new(1)).unwrap();
+    assert_eq!(f, 1.0);
+    assert_eq!(same, mesh);
+}
 
 #[test]
 fn sample_layout_labels_and_determinism() {

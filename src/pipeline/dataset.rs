@@ -148,6 +148,30 @@ fn sorted(mut q: [u32; 4]) -> [u32; 4] {
     q
 }
 
+/// `mesh` stretched along a random axis: every vertex v becomes v + (f − 1)(v·a)a, with
+/// a a uniformly random unit vector and f uniform in [1, `max_factor`], so its quads
+/// change aspect and shear as they would on an object scaled unevenly (the faces stay
+/// the same). Returns the stretched mesh, a and f.
+///
+/// # Errors
+/// `InvalidInput` unless `max_factor` is finite and ≥ 1.
+pub fn stretch_mesh(mesh: &QuadMesh, max_factor: f64, rng: &mut Rng) -> Result<(QuadMesh, [f64; 3], f64)> {
+    if !(max_factor.is_finite() && max_factor >= 1.0) {
+        return Err(Error::invalid(format!("stretch factor must be finite and >= 1, got {max_factor}")));
+    }
+    let a = rng.rotation()[0];
+    let f = rng.uniform(1.0, max_factor);
+    let vertices = mesh
+        .vertices
+        .iter()
+        .map(|v| {
+            let d = (f - 1.0) * (v[0] * a[0] + v[1] * a[1] + v[2] * a[2]);
+            [v[0] + d * a[0], v[1] + d * a[1], v[2] + d * a[2]]
+        })
+        .collect();
+    Ok((QuadMesh { vertices, quads: mesh.quads.clone() }, a, f))
+}
+
 /// Labels candidates: 1 iff the candidate's vertex set equals a ground-truth face's
 /// (compared as sorted index quadruples, so any cyclic order or orientation matches).
 pub fn label_candidates(candidates: &[[u32; 4]], gt_faces: &[[u32; 4]]) -> Vec<u8> {

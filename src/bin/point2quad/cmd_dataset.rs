@@ -12,7 +12,7 @@ use point2quad::mesh::coarsen::{coarsen as coarsen_mesh, CoarsenConfig};
 use point2quad::mesh::poly::QuadMesh;
 use point2quad::pipeline::candidates::CandidateConfig;
 use point2quad::pipeline::dataset::{
-    build_sample, index_line, sample_rng, save_sample, synthetic_mesh, EXTENSION,
+    build_sample, index_line, sample_rng, save_sample, stretch_mesh, synthetic_mesh, EXTENSION,
 };
 use point2quad::pipeline::noise::NoiseConfig;
 use point2quad::{par, Error, Result};
@@ -41,6 +41,14 @@ OPTIONS:
                       most 8 shares). `train`/`refine` split, fold and hold out
                       every NAME@... with NAME. A mesh no chord of which can be
                       collapsed gets no copy. `make train` uses 0.5
+    --stretch F[,F2,...]
+                      also a stretched copy of each mesh of --meshes, sample
+                      NAME@s: stretched along a random axis by a random factor
+                      between 1 and F (1 < F <= 10), so its quads change aspect
+                      and shear, as on an object scaled unevenly; each further
+                      factor adds copies NAME@s2, NAME@s3, ... (at most 8).
+                      Split, folded and held out with NAME, like --coarsen's
+                      copies (which come first)
     --noise F         noise points per mesh vertex (default 0.1; at most 100)
     --offset F        largest noise offset along the face normal, as a fraction of
                       the face's mean edge length (default 0.1; at most 100)
@@ -66,6 +74,9 @@ const MAX_NOISE: f64 = 100.0;
 /// Most shares `--coarsen` takes (each adds a copy of every mesh).
 const MAX_COARSE_COPIES: usize = 8;
 
+/// Largest `--stretch` factor: beyond ten to one the quads are needles.
+const MAX_STRETCH: f64 = 10.0;
+
 /// Where a sample comes from.
 enum Job {
     Synthetic(usize),
@@ -74,12 +85,57 @@ enum Job {
     /// A mesh file, coarsened to this share of its faces by `--coarsen`, and the
     /// sample name (`NAME@c`, `NAME@c2`, ...).
     Coarse(PathBuf, String, f64),
+    /// A mesh file, stretched by `--stretch` (largest factor), and the sample name
+    /// (`NAME@s`, `NAME@s2`, ...).
+    Stretch(PathBuf, String, f64),
+}
+
+/// The comma-separated numbers of `--{flag}` (at most `MAX_COARSE_COPIES`), each
+/// checked by `ok` (which says what it wants); empty without the option. They need
+/// `--meshes`.
+fn copy_values(
+    args: &Args,
+    cmd: &str,
+    flag: &str,
+    ok: impl Fn(f64) -> std::result::Result<(), String>,
+) -> Result<Vec<f64>> {
+    let Some(v) = args.value(flag) else {
+        return Ok(Vec::new());
+    };
+    let mut values = Vec::new();
+    for part in v.split(',') {
+        let f: f64 = part
+            .trim()
+            .parse()
+            .map_err(|_| Error::Usage(format!("{cmd}: {flag} {v:?}: cannot parse {part:?} as a number")))?;
+        ok(f).map_err(|want| Error::Usage(format!("{cmd}: {flag} must be {want}, got {part}")))?;
+        values.push(f);
+    }
+    if values.len() > MAX_COARSE_COPIES {
+        return Err(Error::Usage(format!(
+            "{cmd}: {flag} takes at most {MAX_COARSE_COPIES} values, got {}",
+            values.len()
+        )));
+    }
+    if args.value("--meshes").is_none() {
+        return Err(Error::Usage(format!("{cmd}: {flag} needs --meshes DIR (it copies those meshes)")));
+    }
+    Ok(values)
 }
 
 pub fn run(argv: &[String]) -> Result<()> {
     const CMD: &str = "dataset";
     let spec = Spec {
-        valued: &["--out", "--synthetic", "--meshes", "--noise", "--offset", "--seed", "--coarsen"],
+        valued: &[
+            "--out",
+            "--synthetic",
+            "--meshes",
+            "--noise",
+            "--offset",
+            "--seed",
+            "--coarsen",
+            "--stretch",
+        ],
         switches: &["--bumpy"],
     };
     let args = Args::parse(CMD, argv, &spec)?;
@@ -100,35 +156,20 @@ pub fn run(argv: &[String]) -> Result<()> {
         "about a second of work and a file per sample",
     )?;
     let seed: u64 = args.parsed(CMD, "--seed", 0)?;
-    let coarsen: Vec<f64> = match args.value("--coarsen") {
-        None => Vec::new(),
-        Some(v) => {
-            let mut shares = Vec::new();
-            for part in v.split(',') {
-                let f: f64 = part.trim().parse().map_err(|_| {
-                    Error::Usage(format!("{CMD}: --coarsen {v:?}: cannot parse {part:?} as a number"))
-                })?;
-                if !(f > 0.0 && f < 1.0) {
-                    return Err(Error::Usage(format!(
-                        "{CMD}: --coarsen must be shares of the faces, 0 < F < 1, got {part}"
-                    )));
-                }
-                shares.push(f);
-            }
-            if shares.len() > MAX_COARSE_COPIES {
-                return Err(Error::Usage(format!(
-                    "{CMD}: --coarsen takes at most {MAX_COARSE_COPIES} shares, got {}",
-                    shares.len()
-                )));
-            }
-            if args.value("--meshes").is_none() {
-                return Err(Error::Usage(format!(
-                    "{CMD}: --coarsen needs --meshes DIR (it coarsens those meshes)"
-                )));
-            }
-            shares
+    let coarsen = copy_values(&args, CMD, "--coarsen", |f| {
+        if f > 0.0 && f < 1.0 {
+            Ok(())
+        } else {
+            Err("shares of the faces, 0 < F < 1".into())
         }
-    };
+    })?;
+    let stretch = copy_values(&args, CMD, "--stretch", |f| {
+        if f > 1.0 && f <= MAX_STRETCH {
+            Ok(())
+        } else {
+            Err(format!("stretch factors, 1 < F <= {MAX_STRETCH}"))
+        }
+    })?;
     let noise = NoiseConfig {
         fraction: args.parsed(CMD, "--noise", NoiseConfig::default().fraction)?,
         offset: args.parsed(CMD, "--offset", NoiseConfig::default().offset)?,
@@ -175,6 +216,10 @@ pub fn run(argv: &[String]) -> Result<()> {
             let suffix = if i == 0 { "@c".to_string() } else { format!("@c{}", i + 1) };
             jobs.extend(plain.iter().map(|(p, n)| Job::Coarse(p.clone(), format!("{n}{suffix}"), share)));
         }
+        for (i, &factor) in stretch.iter().enumerate() {
+            let suffix = if i == 0 { "@s".to_string() } else { format!("@s{}", i + 1) };
+            jobs.extend(plain.iter().map(|(p, n)| Job::Stretch(p.clone(), format!("{n}{suffix}"), factor)));
+        }
     }
     if jobs.is_empty() {
         return Err(Error::Usage(format!(
@@ -189,7 +234,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let results: Vec<Result<Option<String>>> = par::map(total, |k| {
         let (name, mesh, mut rng) = match &jobs[k] {
             Job::Synthetic(i) => synthetic_mesh(seed, *i, bumpy),
-            Job::File(path, name) | Job::Coarse(path, name, _) => {
+            Job::File(path, name) | Job::Coarse(path, name, _) | Job::Stretch(path, name, _) => {
                 let mesh = match load_quads(path) {
                     Ok(mesh) => mesh,
                     Err(msg) => {
@@ -210,6 +255,7 @@ pub fn run(argv: &[String]) -> Result<()> {
                         }
                         coarse
                     }
+                    Job::Stretch(_, _, factor) => stretch_mesh(&mesh, *factor, &mut rng)?.0,
                     _ => mesh,
                 };
                 (name.clone(), mesh, rng)

@@ -673,13 +673,7 @@ fn dataset_coarsen_adds_coarse_copies_that_split_with_their_meshes() {
         let hp = HalfedgeMesh::from_quads(p.n_mesh_vertices as usize, &p.gt_faces).unwrap();
         assert_eq!(h.euler_characteristic(), hp.euler_characteristic(), "{f}");
     }
-    let n = cf.len();
-    let model = s.p("m.p2qm");
-    let base = ["train", "--data", &coarse, "--out", &model, "--epochs", "1", "--max-candidates", "300"];
-    let out = ok(&[&base[..], &["--val-fraction", "0", "--hold-out", "b_torus"]].concat());
-    let err = String::from_utf8_lossy(&out.stderr);
-    let want = format!("{} training / 2 validation samples", n - 2);
-    assert!(err.contains(&want), "b_torus and b_torus@c held out: want {want:?} in {err}");
+    held_out_with_b_torus(&coarse, &s.p("m.p2qm"), cf.len(), 2);
     // A second share adds NAME@c2 copies; the first share's copies stay as they were.
     let two = s.p("two");
     ok(&["dataset", "--meshes", &meshes, "--out", &two, "--seed", "3", "--coarsen", "0.5,0.3"]);
@@ -695,31 +689,30 @@ fn dataset_coarsen_adds_coarse_copies_that_split_with_their_meshes() {
         let (c2, c1) = (load(&two, f), load(&two, &f.replace("@c2", "@c")));
         assert!(c2.gt_faces.len() < c1.gt_faces.len(), "{f}: 0.3 of the faces should be fewer than 0.5");
     }
-    let model2 = s.p("m2.p2qm");
-    let out = ok(&[
-        "train",
-        "--data",
-        &two,
-        "--out",
-        &model2,
-        "--epochs",
-        "1",
-        "--max-candidates",
-        "300",
-        "--val-fraction",
-        "0",
-        "--hold-out",
-        "b_torus",
-    ]);
+    held_out_with_b_torus(&two, &s.p("m2.p2qm"), tf.len(), 3);
+    let bad = ["0", "1", "-0.5", "nan", "x", "0.5,,0.3", "0.5,2", "0.9,0.8,0.7,0.6,0.5,0.4,0.3,0.2,0.1"];
+    copy_option_refuses(&s, &meshes, "--coarsen", &bad, "0.5");
+}
+
+/// `train --hold-out b_torus` on `data` (`total` samples): `b_torus` and its
+/// `held` − 1 copies go to validation, the rest to training.
+fn held_out_with_b_torus(data: &str, model: &str, total: usize, held: usize) {
+    let args = ["train", "--data", data, "--out", model, "--epochs", "1", "--max-candidates", "300"];
+    let out = ok(&[&args[..], &["--val-fraction", "0", "--hold-out", "b_torus"]].concat());
     let err = String::from_utf8_lossy(&out.stderr);
-    let want = format!("{} training / 3 validation samples", tf.len() - 3);
-    assert!(err.contains(&want), "b_torus and both copies held out: want {want:?} in {err}");
+    let want = format!("{} training / {held} validation samples", total - held);
+    assert!(err.contains(&want), "b_torus and its copies held out: want {want:?} in {err}");
+}
+
+/// `dataset FLAG VALUE` refuses every value of `bad` (usage error naming the flag) and
+/// a good value without `--meshes`, and makes no folder.
+fn copy_option_refuses(s: &Scratch, meshes: &str, flag: &str, bad: &[&str], good: &str) {
     let never = s.p("never");
-    for bad in ["0", "1", "-0.5", "nan", "x", "0.5,,0.3", "0.5,2", "0.9,0.8,0.7,0.6,0.5,0.4,0.3,0.2,0.1"] {
-        let err = fails(&["dataset", "--meshes", &meshes, "--out", &never, "--coarsen", bad], 2);
-        assert!(err.contains("--coarsen"), "{bad}: {err}");
+    for b in bad {
+        let err = fails(&["dataset", "--meshes", meshes, "--out", &never, flag, b], 2);
+        assert!(err.contains(flag), "{b}: {err}");
     }
-    let err = fails(&["dataset", "--synthetic", "2", "--out", &never, "--coarsen", "0.5"], 2);
+    let err = fails(&["dataset", "--synthetic", "2", "--out", &never, flag, good], 2);
     assert!(err.contains("--meshes"), "{err}");
     assert!(!Path::new(&never).exists());
 }
@@ -776,31 +769,7 @@ fn dataset_stretch_adds_stretched_copies_that_split_with_their_meshes() {
         let (lo, hi) = ratios.iter().fold((f32::MAX, 0.0f32), |(l, h), &r| (l.min(r), h.max(r)));
         assert!(hi / lo > 1.001 && hi / lo <= 2.0 + 1e-3, "{f}: edge ratios {lo}..{hi}");
     }
-    let model = s.p("m.p2qm");
-    let out = ok(&[
-        "train",
-        "--data",
-        &both,
-        "--out",
-        &model,
-        "--epochs",
-        "1",
-        "--max-candidates",
-        "300",
-        "--val-fraction",
-        "0",
-        "--hold-out",
-        "b_torus",
-    ]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    let want = format!("{} training / 3 validation samples", bf.len() - 3);
-    assert!(err.contains(&want), "b_torus, b_torus@c and b_torus@s held out: want {want:?} in {err}");
-    let never = s.p("never");
-    for bad in ["1", "0.5", "10.5", "nan", "x", "2,,3", "2,2,2,2,2,2,2,2,2"] {
-        let err = fails(&["dataset", "--meshes", &meshes, "--out", &never, "--stretch", bad], 2);
-        assert!(err.contains("--stretch"), "{bad}: {err}");
-    }
-    let err = fails(&["dataset", "--synthetic", "2", "--out", &never, "--stretch", "2"], 2);
-    assert!(err.contains("--meshes"), "{err}");
-    assert!(!Path::new(&never).exists());
+    held_out_with_b_torus(&both, &s.p("m.p2qm"), bf.len(), 3);
+    let bad = ["1", "0.5", "10.5", "nan", "x", "2,,3", "2,2,2,2,2,2,2,2,2"];
+    copy_option_refuses(&s, &meshes, "--stretch", &bad, "2");
 }

@@ -25,6 +25,15 @@ use std::path::Path;
 use point2quad::io::mesh_io::read_mesh;
 use point2quad::pipeline::dataset::{load_sample, Sample};
 
+/// `num / den`, 0 when `den` is 0.
+fn ratio(num: usize, den: usize) -> f64 {
+    if den > 0 {
+        num as f64 / den as f64
+    } else {
+        0.0
+    }
+}
+
 fn sorted(q: &[u32]) -> Vec<u32> {
     let mut k = q.to_vec();
     k.sort_unstable();
@@ -89,14 +98,12 @@ fn recall(args: &[String]) -> point2quad::Result<()> {
             c[k] += 1;
             c[k + 1] += usize::from(out.contains(&sorted(&s.candidates[cand])));
         }
-        let r = |a: usize, b: usize| if a > 0 { b as f64 / a as f64 } else { 0.0 };
-        println!("{} | {} | {:.3} | {} | {:.3}", s.name, c[0], r(c[0], c[1]), c[2], r(c[2], c[3]));
+        println!("{} | {} | {:.3} | {} | {:.3}", s.name, c[0], ratio(c[1], c[0]), c[2], ratio(c[3], c[2]));
         for i in 0..4 {
             t[i] += c[i];
         }
     }
-    let r = |a: usize, b: usize| if a > 0 { b as f64 / a as f64 } else { 0.0 };
-    println!("all | {} | {:.3} | {} | {:.3}", t[0], r(t[0], t[1]), t[2], r(t[2], t[3]));
+    println!("all | {} | {:.3} | {} | {:.3}", t[0], ratio(t[1], t[0]), t[2], ratio(t[3], t[2]));
     Ok(())
 }
 
@@ -119,15 +126,14 @@ fn main() -> point2quad::Result<()> {
         let n = r.len();
         let b = r.iter().filter(|x| x.1).count();
         let e = r.iter().filter(|x| x.2).count();
-        let share = |k: usize| if n > 0 { k as f64 / n as f64 } else { 0.0 };
-        println!("{} | {} | {} | {:.3} | {:.3}", s.name, s.gt_faces.len(), n, share(b), share(e));
+        println!("{} | {} | {} | {:.3} | {:.3}", s.name, s.gt_faces.len(), n, ratio(b, n), ratio(e, n));
         (all, better, equal) = (all + n, better + b, equal + e);
     }
     if all > 0 {
         println!(
             "all (true-candidate-weighted) | | {all} | {:.3} | {:.3}",
-            better as f64 / all as f64,
-            equal as f64 / all as f64
+            ratio(better, all),
+            ratio(equal, all)
         );
     }
     Ok(())

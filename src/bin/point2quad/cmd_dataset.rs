@@ -71,8 +71,8 @@ const MAX_SYNTHETIC: usize = 100_000;
 /// offsets of a hundred edges, are no longer a noisy surface.
 const MAX_NOISE: f64 = 100.0;
 
-/// Most shares `--coarsen` takes (each adds a copy of every mesh).
-const MAX_COARSE_COPIES: usize = 8;
+/// Most values `--coarsen` and `--stretch` each take (each adds a copy of every mesh).
+const MAX_COPIES: usize = 8;
 
 /// Largest `--stretch` factor: beyond ten to one the quads are needles.
 const MAX_STRETCH: f64 = 10.0;
@@ -90,7 +90,7 @@ enum Job {
     Stretch(PathBuf, String, f64),
 }
 
-/// The comma-separated numbers of `--{flag}` (at most `MAX_COARSE_COPIES`), each
+/// The comma-separated numbers of `--{flag}` (at most `MAX_COPIES`), each
 /// checked by `ok` (which says what it wants); empty without the option. They need
 /// `--meshes`.
 fn copy_values(
@@ -111,9 +111,9 @@ fn copy_values(
         ok(f).map_err(|want| Error::Usage(format!("{cmd}: {flag} must be {want}, got {part}")))?;
         values.push(f);
     }
-    if values.len() > MAX_COARSE_COPIES {
+    if values.len() > MAX_COPIES {
         return Err(Error::Usage(format!(
-            "{cmd}: {flag} takes at most {MAX_COARSE_COPIES} values, got {}",
+            "{cmd}: {flag} takes at most {MAX_COPIES} values, got {}",
             values.len()
         )));
     }

@@ -2,7 +2,10 @@
 //! candidates at holes (`mesh::rescue`): the quadrangulation's optimum against brute
 //! force, and mesh invariants (validator, border never longer) on grids with holes.
 
-use point2quad::mesh::close::{close_holes, quadrangulate, untangle, untangle_with_candidates, CloseConfig};
+use point2quad::mesh::close::{
+    close_holes, quadrangulate, quadrangulate_with, seal, untangle, untangle_with_candidates, CloseConfig,
+    CloseReport,
+};
 use point2quad::mesh::halfedge::{corner_set, HalfedgeMesh};
 use point2quad::mesh::handles::FaceId;
 use point2quad::mesh::rescue::{rescue_faces, RescueConfig};
@@ -29,9 +32,10 @@ fn area(p: &[[f64; 3]]) -> f64 {
     0.5 * (0..n).map(|i| p[i][0] * p[(i + 1) % n][1] - p[(i + 1) % n][0] * p[i][1]).sum::<f64>()
 }
 
-/// Least Σ(1 − SJ) over every set of n/2 − 1 quads on the vertices of the convex polygon
-/// `pts` whose interiors are disjoint and whose areas add up to the polygon's.
-fn brute_force(pts: &[[f64; 3]]) -> f64 {
+/// Least Σ(1 − SJ + extra) over every set of n/2 − 1 quads on the vertices of the convex
+/// polygon `pts` whose interiors are disjoint and whose areas add up to the polygon's;
+/// `extra` sees a quad's corner indices in increasing order.
+fn brute_force(pts: &[[f64; 3]], extra: &dyn Fn([usize; 4]) -> f64) -> f64 {
     let n = pts.len();
     let mut quads: Vec<[usize; 4]> = Vec::new();
     for a in 0..n {
@@ -79,7 +83,8 @@ fn brute_force(pts: &[[f64; 3]]) -> f64 {
         let qp: Vec<[[f64; 3]; 4]> = set.iter().map(|&q| quads[q].map(|v| pts[v])).collect();
         let a: f64 = qp.iter().map(|p| area(p)).sum();
         if (a - total).abs() < 1e-9 * total.abs().max(1.0) {
-            best = best.min(qp.iter().map(|p| 1.0 - sj(p)).sum());
+            let extras: f64 = set.iter().map(|&q| extra(quads[q])).sum();
+            best = best.min(qp.iter().map(|p| 1.0 - sj(p)).sum::<f64>() + extras);
         }
     };
     rec(0, k, &quads, &mut chosen, &mut visit, &disjoint);
@@ -115,7 +120,39 @@ proptest! {
         let a: f64 = qp.iter().map(|p| area(p)).sum();
         prop_assert!((a - area(&pts)).abs() < 1e-9, "quads do not tile the polygon");
         let cost: f64 = qp.iter().map(|p| 1.0 - sj(p)).sum();
-        let best = brute_force(&pts);
+        let best = brute_force(&pts, &|_| 0.0);
+        prop_assert!((cost - best).abs() < 1e-9, "cost {} vs brute force {}", cost, best);
+    }
+
+    /// With an extra cost per quad (here a hash of its corners, as the seal's support
+    /// term is per corner set), the quadrangulation is still the brute-force optimum.
+    #[test]
+    fn quadrangulation_with_extra_cost_is_optimal(
+        half in 2usize..5,
+        gaps in prop::collection::vec(0.2f64..1.0, 8),
+        salt in any::<u64>(),
+    ) {
+        let n = 2 * half;
+        let sum: f64 = gaps[..n].iter().sum();
+        let mut t = 0.0;
+        let pts: Vec<[f64; 3]> = gaps[..n]
+            .iter()
+            .map(|g| {
+                t += g / sum * std::f64::consts::TAU;
+                [t.cos(), t.sin(), 0.0]
+            })
+            .collect();
+        let extra = |q: [usize; 4]| {
+            let h = q.iter().fold(salt, |h, &v| (h ^ v as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+            (h >> 11) as f64 / (1u64 << 53) as f64 * 2.0
+        };
+        let mesh = HalfedgeMesh::new(n);
+        let vs: Vec<u32> = (0..n as u32).collect();
+        let by_ids = |q: [u32; 4]| extra(q.map(|v| v as usize));
+        let quads = quadrangulate_with(&mesh, &pts, &vs, &vec![None; n], &CloseConfig::default(), &by_ids).unwrap();
+        prop_assert_eq!(quads.len(), n / 2 - 1);
+        let cost: f64 = quads.iter().map(|q| 1.0 - sj(&q.map(|v| pts[v as usize])) + by_ids(*q)).sum();
+        let best = brute_force(&pts, &extra);
         prop_assert!((cost - best).abs() < 1e-9, "cost {} vs brute force {}", cost, best);
     }
 
@@ -497,5 +534,128 @@ proptest! {
         let rb = untangle_with_candidates(&mut b, &pos, &cfg, &[(&cands, &probs), (&extra, &extra_p)]);
         prop_assert_eq!(ra, rb);
         prop_assert_eq!(a.corner_sets(), b.corner_sets());
+    }
+}
+
+/// Corner lists or sorted corner sets of quads.
+type Quads = Vec<[u32; 4]>;
+
+/// A grid whose row-1 faces 1..=k+1 are replaced by k sheared quads, which leaves a
+/// triangle hole at each end of the strip, k faces apart (further than `close_holes`
+/// pairs). Returns the grid, the faces, and the sheared quads' and strip's corner sets.
+fn sheared_strip(k: u32) -> (point2quad::mesh::poly::QuadMesh, Quads, Quads, Quads) {
+    let nu = k + 4;
+    let g = grid(nu as usize, 4, nu as f64, 4.0);
+    let id = |i: u32, j: u32| j * (nu + 1) + i;
+    let strip: Vec<[u32; 4]> =
+        (1..=k + 1).map(|i| corner_set([id(i, 1), id(i + 1, 1), id(i + 1, 2), id(i, 2)])).collect();
+    let sheared: Vec<[u32; 4]> =
+        (1..=k).map(|i| [id(i, 1), id(i + 1, 1), id(i + 2, 2), id(i + 1, 2)]).collect();
+    let mut faces: Vec<[u32; 4]> =
+        g.quads.iter().copied().filter(|q| !strip.contains(&corner_set(*q))).collect();
+    faces.extend(&sheared);
+    let sheared_keys = sheared.iter().map(|&q| corner_set(q)).collect();
+    (g, faces, sheared_keys, strip)
+}
+
+/// Two triangle holes joined by a strip of four sheared quads: `close_holes` cannot pair
+/// them (its paths are at most two faces), the seal takes the strip out and splits it
+/// back into the true quads, which the classifier supports more.
+#[test]
+fn the_seal_replaces_a_sheared_strip_between_two_triangles() {
+    let (g, faces, sheared, strip) = sheared_strip(4);
+    let mut mesh = HalfedgeMesh::from_quads(g.vertices.len(), &faces).unwrap();
+    let triangles = mesh.boundary_loops().iter().filter(|l| l.len() == 3).count();
+    assert_eq!(triangles, 2);
+    let before = mesh.clone();
+    assert_eq!(close_holes(&mut mesh, &g.vertices, &CloseConfig::default()).quads_added, 0);
+    assert_eq!(mesh, before, "close_holes reaches two faces only");
+    let support = |k: [u32; 4]| if sheared.contains(&k) { 0.6 } else { 0.9 };
+    let mut r = CloseReport::default();
+    seal(&mut mesh, &g.vertices, &CloseConfig::default(), &support, &mut r);
+    validate(&mesh).unwrap();
+    assert_eq!((r.sealed, r.seal_removed, r.seal_added), (1, 4, 5), "{r:?}");
+    let mut want: Vec<[u32; 4]> = g.quads.iter().map(|&q| corner_set(q)).collect();
+    want.sort_unstable();
+    assert_eq!(face_keys(&mesh), want);
+    assert!(strip.iter().all(|k| face_keys(&mesh).contains(k)));
+    // Switched off, nothing happens.
+    let mut m2 = before.clone();
+    seal(
+        &mut m2,
+        &g.vertices,
+        &CloseConfig { seal: false, ..Default::default() },
+        &support,
+        &mut CloseReport::default(),
+    );
+    assert_eq!(m2, before);
+}
+
+/// The seal never trades faces the classifier believes for ones it believes less: with
+/// the true strip unsupported and the sheared quads believed, the mesh stays as it is
+/// (the faces around it are believed too, so no path through them is cheap).
+#[test]
+fn the_seal_keeps_believed_faces() {
+    let (g, faces, sheared, strip) = sheared_strip(4);
+    let mut mesh = HalfedgeMesh::from_quads(g.vertices.len(), &faces).unwrap();
+    let before = face_keys(&mesh);
+    let support = |k: [u32; 4]| {
+        if sheared.contains(&k) {
+            0.9
+        } else if strip.contains(&k) {
+            0.0
+        } else {
+            1.0
+        }
+    };
+    let mut r = CloseReport::default();
+    seal(&mut mesh, &g.vertices, &CloseConfig::default(), &support, &mut r);
+    assert_eq!(r.sealed, 0, "{r:?}");
+    validate(&mesh).unwrap();
+    assert_eq!(face_keys(&mesh), before, "attempts put their faces back");
+    // Without the guard (keep 0) the strip goes, and the split it gets back is the
+    // best-shaped one: the true quads.
+    let lax = CloseConfig { seal_keep_support: 0.0, ..Default::default() };
+    seal(&mut mesh, &g.vertices, &lax, &support, &mut r);
+    assert_eq!(r.sealed, 1, "{r:?}");
+    assert!(strip.iter().all(|k| face_keys(&mesh).contains(k)));
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    /// Grids with faces removed and sheared strips put in at random: the seal keeps the
+    /// mesh valid, never lengthens the border, adds no vertex, puts in only quads that
+    /// meet the closing's shape bound, and closes a lone sheared strip exactly.
+    #[test]
+    fn the_seal_keeps_the_mesh_valid(k in 3u32..7, seed in any::<u64>(), share in prop::sample::select(vec![0.0, 0.05, 0.1, 0.2])) {
+        let (g, faces, sheared, _) = sheared_strip(k);
+        let mut rng = point2quad::rng::Rng::new(seed);
+        let mut mesh = HalfedgeMesh::from_quads(g.vertices.len(), &faces).unwrap();
+        for (f, q) in faces.iter().enumerate() {
+            // Removals that would leave a corner with two fans are refused; skip those.
+            if !sheared.contains(&corner_set(*q)) && rng.uniform(0.0, 1.0) < share {
+                let _ = mesh.remove_face(FaceId(f as u32));
+            }
+        }
+        let border0: usize = mesh.boundary_loops().iter().map(Vec::len).sum();
+        let old = face_keys(&mesh);
+        let support = |q: [u32; 4]| if sheared.contains(&q) { 0.5 } else { 0.9 };
+        let mut r = CloseReport::default();
+        seal(&mut mesh, &g.vertices, &CloseConfig::default(), &support, &mut r);
+        validate(&mesh).unwrap();
+        let border: usize = mesh.boundary_loops().iter().map(Vec::len).sum();
+        prop_assert!(border <= border0, "border {} > {}", border, border0);
+        prop_assert_eq!(mesh.n_vertices(), g.vertices.len());
+        prop_assert_eq!(mesh.n_faces() + r.seal_removed, old.len() + r.seal_added);
+        for f in mesh.faces() {
+            let c = mesh.face_vertices(f).map(|v| v.0);
+            if !old.contains(&corner_set(c)) {
+                prop_assert!(sj3(&c.map(|v| g.vertices[v as usize])) >= 0.02, "new quad {:?}", c);
+            }
+        }
+        if share == 0.0 {
+            prop_assert_eq!(r.sealed, 1);
+        }
     }
 }

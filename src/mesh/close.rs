@@ -48,6 +48,26 @@ pub struct CloseConfig {
     /// to four faces around it are re-split over the same vertices into better-shaped
     /// quads the classifier believes at least as much.
     pub untangle: bool,
+    /// Whether [`seal`] runs after the closing: a loop still open is re-closed by taking
+    /// out the faces around it (up to `seal_rings` rings) and quadrangulating the larger
+    /// loop that leaves, preferring quads the classifier supports.
+    pub seal: bool,
+    /// Rings of faces around a loop that [`seal`] may take out (1 = the faces touching
+    /// the loop's vertices).
+    pub seal_rings: usize,
+    /// Most faces [`seal`] takes out around one loop.
+    pub seal_max_faces: usize,
+    /// Longest loop [`seal`] quadrangulates (after taking faces out).
+    pub seal_max_loop_edges: usize,
+    /// Weight of (1 − support) in [`seal`]'s quadrangulation cost, beside
+    /// (1 − scaled Jacobian): support is the classifier's probability of the quad (0 for
+    /// a quad that is no candidate).
+    pub seal_support_weight: f64,
+    /// Longest path of faces [`seal`] takes out to join an odd loop to another.
+    pub seal_max_path_faces: usize,
+    /// [`seal`]'s quads go in only if their summed support is at least this times the
+    /// summed support of the faces they replace.
+    pub seal_keep_support: f64,
 }
 
 impl Default for CloseConfig {
@@ -62,6 +82,13 @@ impl Default for CloseConfig {
             pair_odd_loops: true,
             max_path_faces: 2,
             untangle: true,
+            seal: true,
+            seal_rings: 2,
+            seal_max_faces: 40,
+            seal_max_loop_edges: 60,
+            seal_support_weight: 1.0,
+            seal_max_path_faces: 8,
+            seal_keep_support: 0.8,
         }
     }
 }
@@ -77,6 +104,12 @@ pub struct CloseReport {
     pub quads_added: usize,
     /// Faces replaced by [`untangle`] (each bad face and the neighbours re-split with it).
     pub untangled: usize,
+    /// Loops [`seal`] closed.
+    pub sealed: usize,
+    /// Faces [`seal`] took out (and did not put back), and quads it added.
+    pub seal_removed: usize,
+    /// See `seal_removed`.
+    pub seal_added: usize,
 }
 
 /// The quads (corner lists in loop order) that close the loop `vs` (the from-vertices of
@@ -94,6 +127,23 @@ pub fn quadrangulate(
     vs: &[u32],
     across: &[Option<[f64; 3]>],
     cfg: &CloseConfig,
+) -> Option<Vec<[u32; 4]>> {
+    quadrangulate_with(mesh, pos, vs, across, cfg, &|_| 0.0)
+}
+
+/// [`quadrangulate`] with `extra(q)` (≥ 0, finite) added to the cost of each quad `q`
+/// (corners in loop order): of the quadrangulations that meet the bounds it returns one
+/// of least Σ(1 − scaled Jacobian + extra).
+///
+/// # Panics
+/// As [`quadrangulate`].
+pub fn quadrangulate_with(
+    mesh: &HalfedgeMesh,
+    pos: &[[f64; 3]],
+    vs: &[u32],
+    across: &[Option<[f64; 3]>],
+    cfg: &CloseConfig,
+    extra: &dyn Fn([u32; 4]) -> f64,
 ) -> Option<Vec<[u32; 4]>> {
     let n = vs.len();
     if n < 4 || n % 2 == 1 {
@@ -135,7 +185,7 @@ pub fn quadrangulate(
                 }
             }
         }
-        Some(1.0 - sj)
+        Some(1.0 - sj + extra(q))
     };
     // best[i][j] for the sub-polygon vs[i..=j] closed by the chord (i, j), j − i odd.
     const NONE: f64 = f64::INFINITY;
@@ -663,4 +713,376 @@ pub fn untangle_with_candidates(
         }
     }
     untangle_faces(mesh, pos, cfg, bad, &|k| table.get(&k).copied().unwrap_or(0.0))
+}
+
+/// The loop through boundary half-edge `start`: its half-edges in order, or `None` when it
+/// has more than `max` edges.
+fn walk_loop(mesh: &HalfedgeMesh, start: HalfedgeId, max: usize) -> Option<Vec<HalfedgeId>> {
+    let mut lp = vec![start];
+    let mut h = mesh.next(start);
+    while h != start {
+        if lp.len() >= max {
+            return None;
+        }
+        lp.push(h);
+        h = mesh.next(h);
+    }
+    Some(lp)
+}
+
+/// Takes the faces `region` out of `mesh`, each as soon as it can go (a face in the middle
+/// of a corner's open fan waits for its neighbours). Returns the corners of the faces
+/// taken out, in order; when not all could go, they are put back and `None` is returned.
+fn take_out(mesh: &mut HalfedgeMesh, region: &[FaceId]) -> Option<Vec<[VertexId; 4]>> {
+    let mut left: Vec<FaceId> = region.to_vec();
+    let mut out: Vec<[VertexId; 4]> = Vec::with_capacity(region.len());
+    while !left.is_empty() {
+        let before = left.len();
+        left.retain(|&f| {
+            let c = mesh.face_vertices(f);
+            let gone = mesh.remove_face(f).is_ok();
+            if gone {
+                out.push(c);
+            }
+            !gone
+        });
+        if left.len() == before {
+            put_back(mesh, &out);
+            return None;
+        }
+    }
+    Some(out)
+}
+
+/// Puts faces taken out by [`take_out`] back, last first.
+fn put_back(mesh: &mut HalfedgeMesh, out: &[[VertexId; 4]]) {
+    for c in out.iter().rev() {
+        mesh.add_face(*c).expect("internal error: a face just taken out goes back");
+    }
+}
+
+/// Adds all of `quads` or none of them; whether they went in. A quad `add_face` refuses
+/// at first (a corner whose fan it would split) is tried again after the others.
+fn add_all(mesh: &mut HalfedgeMesh, quads: &[[u32; 4]]) -> bool {
+    let mut added: Vec<FaceId> = Vec::with_capacity(quads.len());
+    let mut left: Vec<[u32; 4]> = quads.to_vec();
+    while !left.is_empty() {
+        let before = left.len();
+        left.retain(|q| match mesh.add_face(q.map(VertexId)) {
+            Ok(f) => {
+                added.push(f);
+                false
+            }
+            Err(_) => true,
+        });
+        if left.len() == before {
+            // Taken out again in reverse order of insertion, which always succeeds.
+            for &f in added.iter().rev() {
+                mesh.remove_face(f).expect("internal error: a face just added comes off again");
+            }
+            return false;
+        }
+    }
+    true
+}
+
+/// Closes the loops that the closing left open where the faces around them are the
+/// trouble (not in the paper; README "Session 12"):
+/// - an **odd** loop is joined to another odd loop by taking out a path of at most
+///   `cfg.seal_max_path_faces` faces between them, the least supported path first
+///   (Dijkstra over faces, each costing 0.05 + its support);
+/// - an **even** loop that no quadrangulation of its own vertices closes (or whose border
+///   turns the wrong way: a face folded over the hole) loses the faces with a corner on
+///   it, then (second ring) the faces with a corner on those.
+///
+/// Either way the faces taken out (at most `cfg.seal_max_faces`) must leave a single loop
+/// through their corners, of even length, at most `cfg.seal_max_loop_edges` edges, that
+/// is a hole ([`CloseConfig::min_loop_coherence`]); it is quadrangulated over its own
+/// vertices at least cost Σ(1 − scaled Jacobian + `cfg.seal_support_weight` · (1 −
+/// support)), within the closing's shape and fold bounds, and the quads go in only if
+/// their summed support is at least `cfg.seal_keep_support` times that of the faces taken
+/// out. Otherwise the faces go back. `support(k)` is the classifier's probability of the
+/// quad with sorted corners `k` (0 when none, e.g. for hole-filling quads). Loops are
+/// visited shortest first, in up to four passes. Adds no vertex; points that lose all
+/// their faces stay isolated; the mesh stays manifold and oriented (every face goes
+/// through `add_face`). Returns nothing; counts go to `report`.
+pub fn seal(
+    mesh: &mut HalfedgeMesh,
+    pos: &[[f64; 3]],
+    cfg: &CloseConfig,
+    support: &dyn Fn([u32; 4]) -> f32,
+    report: &mut CloseReport,
+) {
+    if !cfg.enabled || !cfg.seal {
+        return;
+    }
+    let sup = |q: [u32; 4]| f64::from(support(corner_set(q))).clamp(0.0, 1.0);
+    for _pass in 0..4 {
+        let mut loops: Vec<Vec<HalfedgeId>> =
+            mesh.boundary_loops().into_iter().filter(|l| l.len() <= cfg.seal_max_loop_edges).collect();
+        loops.sort_by_key(Vec::len);
+        let mut changed = false;
+        for lp in loops {
+            // An earlier seal this pass may have changed this loop.
+            let unchanged = mesh.is_boundary(lp[0])
+                && walk_loop(mesh, lp[0], cfg.seal_max_loop_edges).is_some_and(|cur| cur == lp);
+            if !unchanged {
+                continue;
+            }
+            let done = if lp.len() % 2 == 1 {
+                seal_odd(mesh, pos, cfg, &lp, &sup, report)
+            } else {
+                seal_even(mesh, pos, cfg, &lp, &sup, report)
+            };
+            changed |= done;
+        }
+        if !changed {
+            break;
+        }
+    }
+}
+
+/// [`seal`] for an odd loop (its half-edges); whether it was closed.
+fn seal_odd(
+    mesh: &mut HalfedgeMesh,
+    pos: &[[f64; 3]],
+    cfg: &CloseConfig,
+    lp: &[HalfedgeId],
+    sup: &dyn Fn([u32; 4]) -> f64,
+    report: &mut CloseReport,
+) -> bool {
+    let loops = mesh.boundary_loops();
+    let id = loop_ids(mesh, &loops);
+    let Some(l) = loop_of(mesh, &id, lp[0]) else { return false };
+    let odd = |m: usize| loops[m].len() % 2 == 1 && loops[m].len() <= cfg.seal_max_loop_edges;
+    let cost = |f: FaceId| 0.05 + sup(mesh.face_vertices(f).map(|v| v.0));
+    let paths = cheap_face_paths(mesh, &loops[l], l, &id, &odd, cfg.seal_max_path_faces, &cost);
+    for path in paths {
+        // Paths share faces, and a failed attempt puts faces back under new ids.
+        if path.len() <= cfg.seal_max_faces
+            && path.iter().all(|&f| mesh.is_face_alive(f))
+            && reclose(mesh, pos, cfg, &path, sup, report)
+        {
+            return true;
+        }
+    }
+    false
+}
+
+/// [`seal`] for an even loop (its half-edges); whether it was closed.
+fn seal_even(
+    mesh: &mut HalfedgeMesh,
+    pos: &[[f64; 3]],
+    cfg: &CloseConfig,
+    lp: &[HalfedgeId],
+    sup: &dyn Fn([u32; 4]) -> f64,
+    report: &mut CloseReport,
+) -> bool {
+    // The vertices whose faces go: the loop's, then the corners of those faces. (Faces
+    // are listed afresh each ring: faces put back get new ids.)
+    let mut verts: Vec<VertexId> = lp.iter().map(|&h| mesh.from_vertex(h)).collect();
+    let mut last = 0;
+    for _ring in 0..cfg.seal_rings {
+        let mut region: Vec<FaceId> = Vec::new();
+        for &v in &verts {
+            for f in mesh.vertex_faces(v) {
+                if !region.contains(&f) {
+                    region.push(f);
+                }
+            }
+        }
+        if region.len() == last || region.len() > cfg.seal_max_faces {
+            return false;
+        }
+        last = region.len();
+        verts = region.iter().flat_map(|&f| mesh.face_vertices(f)).collect();
+        verts.sort_unstable_by_key(|v| v.0);
+        verts.dedup();
+        if reclose(mesh, pos, cfg, &region, sup, report) {
+            return true;
+        }
+    }
+    false
+}
+
+/// Takes `region` out and closes the one loop that leaves through its corners, as
+/// [`seal`] says; on failure the mesh is as before. Whether it closed.
+fn reclose(
+    mesh: &mut HalfedgeMesh,
+    pos: &[[f64; 3]],
+    cfg: &CloseConfig,
+    region: &[FaceId],
+    sup: &dyn Fn([u32; 4]) -> f64,
+    report: &mut CloseReport,
+) -> bool {
+    let mut corners: Vec<VertexId> = region.iter().flat_map(|&f| mesh.face_vertices(f)).collect();
+    corners.sort_unstable_by_key(|v| v.0);
+    corners.dedup();
+    let Some(out) = take_out(mesh, region) else { return false };
+    let had: f64 = out.iter().map(|c| sup(c.map(|v| v.0))).sum();
+    let added = the_one_loop(mesh, &corners, cfg.seal_max_loop_edges).and_then(|l| {
+        let vs: Vec<u32> = l.iter().map(|&h| mesh.from_vertex(h).0).collect();
+        let across: Vec<Option<[f64; 3]>> = l.iter().map(|&h| normal_across(mesh, pos, h)).collect();
+        if vs.len() % 2 == 1 || !is_hole(pos, &vs, &across, cfg) {
+            return None;
+        }
+        let extra = |q: [u32; 4]| cfg.seal_support_weight * (1.0 - sup(q));
+        let quads = quadrangulate_with(mesh, pos, &vs, &across, cfg, &extra)?;
+        let gets: f64 = quads.iter().map(|&q| sup(q)).sum();
+        (gets >= cfg.seal_keep_support * had - 1e-9 && add_all(mesh, &quads)).then_some(quads.len())
+    });
+    match added {
+        Some(n) => {
+            report.sealed += 1;
+            report.seal_removed += out.len();
+            report.seal_added += n;
+            true
+        }
+        None => {
+            put_back(mesh, &out);
+            false
+        }
+    }
+}
+
+/// The boundary loop through `corners` when there is exactly one and it has at most
+/// `max` edges.
+fn the_one_loop(mesh: &HalfedgeMesh, corners: &[VertexId], max: usize) -> Option<Vec<HalfedgeId>> {
+    let mut found: Option<Vec<HalfedgeId>> = None;
+    for &v in corners {
+        for h in mesh.vertex_outgoing(v).filter(|&h| mesh.is_boundary(h)) {
+            if found.as_ref().is_some_and(|l| l.contains(&h)) {
+                continue;
+            }
+            if found.is_some() {
+                return None; // a second loop
+            }
+            found = Some(walk_loop(mesh, h, max)?);
+        }
+    }
+    found
+}
+
+/// The support table [`seal`] reads: for each candidate of `lists` ((quads,
+/// probabilities) pairs) whose corners all lie within `rings` rings of faces around a
+/// boundary loop, its sorted corners and highest probability. Empty when the mesh is
+/// closed, so a closed mesh costs one pass over its half-edges.
+pub fn support_near_loops(
+    mesh: &HalfedgeMesh,
+    rings: usize,
+    lists: &[(&[[u32; 4]], &[f32])],
+) -> std::collections::HashMap<[u32; 4], f32> {
+    let mut table = std::collections::HashMap::new();
+    let mut near = vec![false; mesh.n_vertices()];
+    let mut frontier: Vec<VertexId> =
+        mesh.boundary_loops().iter().flatten().map(|&h| mesh.from_vertex(h)).collect();
+    if frontier.is_empty() {
+        return table;
+    }
+    for &v in &frontier {
+        near[v.idx()] = true;
+    }
+    for _ in 0..rings {
+        let mut next = Vec::new();
+        for &v in &frontier {
+            for f in mesh.vertex_faces(v) {
+                for w in mesh.face_vertices(f) {
+                    if !near[w.idx()] {
+                        near[w.idx()] = true;
+                        next.push(w);
+                    }
+                }
+            }
+        }
+        frontier = next;
+    }
+    for (quads, probs) in lists {
+        for (q, &p) in quads.iter().zip(probs.iter()) {
+            if q.iter().all(|&v| near.get(v as usize).copied().unwrap_or(false)) {
+                let e = table.entry(corner_set(*q)).or_insert(p);
+                *e = e.max(p);
+            }
+        }
+    }
+    table
+}
+
+/// Paths of faces (at most `max_faces` long), each from a face across loop `l` to a face
+/// with an edge on a loop `m != l` with `want(m)`, moving across interior edges, in order
+/// of least total `cost` (Dijkstra; one path per end face, at most 32).
+fn cheap_face_paths(
+    mesh: &HalfedgeMesh,
+    lp: &[HalfedgeId],
+    l: usize,
+    id: &[u32],
+    want: &dyn Fn(usize) -> bool,
+    max_faces: usize,
+    cost: &dyn Fn(FaceId) -> f64,
+) -> Vec<Vec<FaceId>> {
+    use std::cmp::Ordering;
+    use std::collections::{BinaryHeap, HashMap};
+    #[derive(PartialEq)]
+    struct Item(f64, u32, usize);
+    impl Eq for Item {}
+    impl PartialOrd for Item {
+        fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+            Some(self.cmp(o))
+        }
+    }
+    impl Ord for Item {
+        fn cmp(&self, o: &Self) -> Ordering {
+            o.0.total_cmp(&self.0).then(o.1.cmp(&self.1))
+        }
+    }
+    // face -> (best cost, parent, length)
+    let mut best: HashMap<u32, (f64, Option<FaceId>, usize)> = HashMap::new();
+    let mut heap = BinaryHeap::new();
+    for &h in lp {
+        if let Some(f) = mesh.face(h.opposite()) {
+            let c = cost(f);
+            if best.get(&f.0).map_or(true, |b| c < b.0) {
+                best.insert(f.0, (c, None, 1));
+                heap.push(Item(c, f.0, 1));
+            }
+        }
+    }
+    let mut done: std::collections::HashSet<u32> = std::collections::HashSet::new();
+    let mut paths = Vec::new();
+    while let Some(Item(c, f, len)) = heap.pop() {
+        if !done.insert(f) {
+            continue;
+        }
+        let face = FaceId(f);
+        let hits = mesh
+            .face_halfedges(face)
+            .iter()
+            .any(|g| loop_of(mesh, id, g.opposite()).is_some_and(|m| m != l && want(m)));
+        if hits {
+            let mut path = vec![face];
+            let mut cur = face;
+            while let Some(&(_, Some(p), _)) = best.get(&cur.0) {
+                path.push(p);
+                cur = p;
+            }
+            path.reverse();
+            paths.push(path);
+            if paths.len() >= 32 {
+                break;
+            }
+            continue;
+        }
+        if len >= max_faces {
+            continue;
+        }
+        for g in mesh.face_halfedges(face) {
+            if let Some(n) = mesh.face(g.opposite()) {
+                let nc = c + cost(n);
+                if !done.contains(&n.0) && best.get(&n.0).map_or(true, |b| nc < b.0) {
+                    best.insert(n.0, (nc, Some(face), len + 1));
+                    heap.push(Item(nc, n.0, len + 1));
+                }
+            }
+        }
+    }
+    paths
 }

@@ -15,7 +15,7 @@
 use std::collections::HashMap;
 
 use super::halfedge::HalfedgeMesh;
-use super::handles::{HalfedgeId, VertexId};
+use super::handles::{FaceId, HalfedgeId, VertexId};
 use super::quality::is_degenerate_quad;
 use crate::error::{Error, Result};
 use crate::math::{add, cross, dist_sq, dot, norm, normalize, scale, sub};
@@ -46,6 +46,11 @@ pub struct HoleFillConfig {
     /// Pattern 3 reuses an isolated vertex within this fraction of the corner's mean
     /// edge length from the parallelogram point instead of adding a vertex.
     pub snap_radius: f64,
+    /// When the patterns cannot close a loop and invented a vertex on the way, the loop
+    /// is put back as it was: a partial fill's new vertices can fold over the rest of the
+    /// hole, and its quads stand in the way of the rescue and the closing that come
+    /// after. A partial fill over existing points only (a border's notches) stays.
+    pub undo_partial_fills: bool,
     /// Uniform Laplacian steps applied to the added vertices (and only to them).
     pub smoothing_steps: usize,
     /// Fills tried per loop are bounded by this many times its length.
@@ -66,6 +71,7 @@ impl Default for HoleFillConfig {
             loop4_min_scaled_jacobian: -1.0,
             loop4_min_normal_dot: -1.0,
             snap_radius: 0.5,
+            undo_partial_fills: true,
             smoothing_steps: 3,
             max_steps_per_edge: 2,
         }
@@ -177,6 +183,8 @@ struct Filler<'a> {
     cos_tol: f64,
     report: HoleFillReport,
     added: Vec<u32>,
+    /// Faces placed while filling the current loop.
+    placed: Vec<FaceId>,
 }
 
 /// A candidate quad closing part of a loop.
@@ -345,7 +353,8 @@ impl Filler<'_> {
                 new_vertex = Some(v);
             }
             match self.mesh.add_face(c.quad.map(VertexId)) {
-                Ok(_) => {
+                Ok(face) => {
+                    self.placed.push(face);
                     self.report.quads_by_pattern[c.pattern - 1] += 1;
                     if let Some(v) = new_vertex {
                         self.report.vertices_added += 1;
@@ -462,6 +471,7 @@ pub fn fill_holes(
         cos_tol: cfg.right_angle_tol_deg.to_radians().sin(),
         report: HoleFillReport { loops_before: loops.len(), ..Default::default() },
         added: Vec::new(),
+        placed: Vec::new(),
     };
     for lp in loops {
         if lp.len() > cfg.max_hole_edges || lp.len() % 2 == 1 {
@@ -472,8 +482,22 @@ pub fn fill_holes(
             continue;
         }
         f.report.loops_eligible += 1;
+        let (report, added, n_pos) = (f.report.clone(), f.added.len(), f.pos.len());
+        f.placed.clear();
         if f.fill_loop(lp[0]) {
             f.report.loops_closed += 1;
+        } else if cfg.undo_partial_fills && f.pos.len() > n_pos {
+            // A partial fill that invented vertices goes back out, last face first, with
+            // its new vertices (the last ones appended; nothing else refers to them then).
+            for &face in f.placed.iter().rev() {
+                f.mesh.remove_face(face).expect("internal error: a fill quad comes off again");
+            }
+            while f.pos.len() > n_pos {
+                f.pos.pop();
+                f.mesh.v_out.pop();
+            }
+            f.added.truncate(added);
+            f.report = report;
         }
     }
     f.smooth();
@@ -526,6 +550,34 @@ mod tests {
         assert_eq!(keys(&m), keys(&full), "{r:?}");
     }
 
+    /// A hole the patterns give up on after inventing a vertex is put back as it was
+    /// (`undo_partial_fills`); without it the partial fill stays. Here a 2×3 block with
+    /// its interior points moved away, and a step bound too small to finish it.
+    #[test]
+    fn a_partial_fill_that_invented_vertices_is_undone() {
+        let (mut p, q) = grid(6);
+        let mut m = HalfedgeMesh::from_quads(p.len(), &q).unwrap();
+        for f in [7, 8, 9, 13, 14, 15] {
+            m.remove_face(FaceId(f)).unwrap();
+        }
+        for v in [16, 17] {
+            p[v] = [50.0, 50.0, 50.0];
+        }
+        let holed = keys(&m);
+        let cfg = HoleFillConfig { max_steps_per_edge: 0, ..HoleFillConfig::default() };
+        let (mut m1, mut p1) = (m.clone(), p.clone());
+        let r = fill_holes(&mut m1, &mut p1, &cfg).unwrap();
+        validate(&m1).unwrap();
+        assert_eq!((r.quads_added(), r.vertices_added, r.loops_closed), (0, 0, 0), "{r:?}");
+        assert_eq!(keys(&m1), holed);
+        assert_eq!((p1.len(), m1.n_vertices()), (p.len(), p.len()));
+        let keep = HoleFillConfig { undo_partial_fills: false, ..cfg };
+        let r = fill_holes(&mut m, &mut p, &keep).unwrap();
+        validate(&m).unwrap();
+        assert_eq!(r.loops_closed, 0, "{r:?}");
+        assert!(r.vertices_added > 0 && r.quads_added() > 0, "{r:?}");
+    }
+
     #[test]
     fn open_border_is_left_alone() {
         let (mut p, q) = grid(3);
@@ -576,6 +628,7 @@ mod tests {
                 cos_tol: 0.0,
                 report: HoleFillReport::default(),
                 added,
+                placed: Vec::new(),
             };
             f.smooth();
         };

@@ -7,8 +7,10 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use super::close::{close_holes, untangle_with_candidates, CloseConfig, CloseReport};
-use super::halfedge::{HalfedgeMesh, InsertOutcome};
+use super::close::{
+    close_holes, seal, support_near_loops, untangle_with_candidates, CloseConfig, CloseReport,
+};
+use super::halfedge::{corner_set, HalfedgeMesh, InsertOutcome};
 use super::hole_fill::{fill_holes, quad_normal, HoleFillConfig, HoleFillReport};
 use super::poly::QuadMesh;
 use super::quality::is_degenerate_quad;
@@ -338,15 +340,22 @@ pub fn orient_components(
     faces: &[[u32; 4]],
     out: &InsertOutcome,
 ) -> usize {
+    // The inserted faces as given, by corner set: face ids are not stable (a face taken
+    // out and put back by the later steps gets a new id, and a freed id is reused).
+    let given: std::collections::HashMap<[u32; 4], [u32; 4]> = out
+        .inserted
+        .iter()
+        .zip(faces)
+        .filter(|(f, _)| f.is_some())
+        .map(|(_, q)| (corner_set(*q), *q))
+        .collect();
     let mut as_given = vec![0i8; mesh.face_capacity()];
-    for (i, f) in out.inserted.iter().enumerate() {
-        let Some(f) = *f else { continue };
-        if !mesh.is_face_alive(f) {
-            continue;
-        }
+    for f in mesh.faces() {
         let got = mesh.face_vertices(f).map(|v| v.0);
-        let same = (0..4).any(|k| (0..4).all(|j| got[(j + k) % 4] == faces[i][j]));
-        as_given[f.idx()] = if same { 1 } else { -1 };
+        if let Some(q) = given.get(&corner_set(got)) {
+            let same = (0..4).any(|k| (0..4).all(|j| got[(j + k) % 4] == q[j]));
+            as_given[f.idx()] = if same { 1 } else { -1 };
+        }
     }
     let mut flipped = 0;
     for comp in mesh.connected_components() {
@@ -465,11 +474,19 @@ pub fn postprocess_with_reserve(
     report.close = close_holes(&mut mesh, &pos, &cfg.close);
     if cfg.fill_holes && (report.rescued > 0 || report.close.quads_added > 0) {
         // The rescue and the closing changed the loops: the patterns may now apply.
-        let again = fill_holes(&mut mesh, &mut pos, &cfg.hole_fill)?;
+        // This last fill keeps what it can place of a loop it cannot close: nothing after
+        // it fills with new vertices.
+        let last = HoleFillConfig { undo_partial_fills: false, ..cfg.hole_fill.clone() };
+        let again = fill_holes(&mut mesh, &mut pos, &last)?;
         report.hole_fill.absorb(&again);
     }
     // Rescued faces and removals can leave new floaters.
     report.floater_faces_removed += remove_small_open_components(&mut mesh, cfg.max_floater_faces);
+    if cfg.close.enabled && cfg.close.seal {
+        let table =
+            support_near_loops(&mesh, cfg.close.seal_rings + 1, &[(faces, probs), (reserve, reserve_probs)]);
+        seal(&mut mesh, &pos, &cfg.close, &|k| table.get(&k).copied().unwrap_or(0.0), &mut report.close);
+    }
     if cfg.close.enabled && cfg.close.untangle {
         report.close.untangled = untangle_with_candidates(
             &mut mesh,

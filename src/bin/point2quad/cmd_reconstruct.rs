@@ -38,7 +38,11 @@ OPTIONS:
     --no-close            leave odd loops and loops the hole filling could not close
                           open (default: pair odd loops through the faces between
                           them, quadrangulate loops of at most 40 edges; implies
-                          --no-untangle)
+                          --no-seal and --no-untangle)
+    --no-seal             leave the loops the closing could not close (default: take
+                          out the faces around each, or a path of faces to another
+                          odd loop, and re-split the larger hole into quads the
+                          classifier supports, when it does not lose support)
     --no-untangle         keep badly shaped faces (scaled Jacobian under 0.02:
                           inverted, folded) as they are (default: re-split each with
                           the faces next to it over the same vertices when that gives
@@ -56,7 +60,7 @@ const SPEC: Spec = Spec {
         "--max-floater-faces",
         "--rescue-min-prob",
     ],
-    switches: &["--no-postprocess", "--no-rescue", "--no-close", "--no-untangle"],
+    switches: &["--no-postprocess", "--no-rescue", "--no-close", "--no-seal", "--no-untangle"],
 };
 
 /// The weights shipped with the project (`make train` writes them), embedded in the
@@ -91,6 +95,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         a.parsed_in(cmd, "--rescue-min-prob", pp.rescue.min_prob, 0.0, 1.0, "it is a probability")?;
     pp.rescue.enabled = !a.switch("--no-rescue");
     pp.close.enabled = !a.switch("--no-close");
+    pp.close.seal = !a.switch("--no-seal");
     pp.close.untangle = !a.switch("--no-untangle");
     // Check the output names before the work, not after it.
     point2quad::io::mesh_io::MeshFormat::from_path(&out)?;
@@ -142,7 +147,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let (filled, refused) = (pp.hole_fill.quads_added(), pp.refused_on_insertion + pp.removed_by_score);
     // Through `output::stderr`: `eprintln!` panics when stderr is a closed pipe.
     crate::output::stderr(&format!(
-        "reconstruct: {} points, {} candidates, {} predicted real, {} faces kept ({} removed/refused), {} floater faces removed, {} candidates rescued at holes, {} hole quads filled ({} new vertices), {} loops closed ({} quads, {} faces taken out), {} badly shaped faces re-split -> {}\n",
+        "reconstruct: {} points, {} candidates, {} predicted real, {} faces kept ({} removed/refused), {} floater faces removed, {} candidates rescued at holes, {} hole quads filled ({} new vertices), {} loops closed ({} quads, {} faces taken out), {} loops sealed ({} faces replaced by {}), {} badly shaped faces re-split -> {}\n",
         rep.points,
         rep.candidates,
         rep.predicted,
@@ -155,6 +160,9 @@ pub fn run(argv: &[String]) -> Result<()> {
         pp.close.loops_closed,
         pp.close.quads_added,
         pp.close.faces_removed,
+        pp.close.sealed,
+        pp.close.seal_removed,
+        pp.close.seal_added,
         pp.close.untangled,
         out.display()
     ));

@@ -91,6 +91,19 @@ fn brute_force(pts: &[[f64; 3]], extra: &dyn Fn([usize; 4]) -> f64) -> f64 {
     best
 }
 
+/// Points on the unit circle (a convex polygon), one per gap, spaced by the gaps' shares
+/// of the full turn.
+fn circle_polygon(gaps: &[f64]) -> Vec<[f64; 3]> {
+    let sum: f64 = gaps.iter().sum();
+    let mut t = 0.0;
+    gaps.iter()
+        .map(|g| {
+            t += g / sum * std::f64::consts::TAU;
+            [t.cos(), t.sin(), 0.0]
+        })
+        .collect()
+}
+
 fn boundary_edges(m: &HalfedgeMesh) -> usize {
     m.boundary_loops().iter().map(Vec::len).sum()
 }
@@ -103,15 +116,7 @@ proptest! {
     #[test]
     fn quadrangulation_is_optimal(half in 2usize..5, gaps in prop::collection::vec(0.2f64..1.0, 8)) {
         let n = 2 * half;
-        let sum: f64 = gaps[..n].iter().sum();
-        let mut t = 0.0;
-        let pts: Vec<[f64; 3]> = gaps[..n]
-            .iter()
-            .map(|g| {
-                t += g / sum * std::f64::consts::TAU;
-                [t.cos(), t.sin(), 0.0]
-            })
-            .collect();
+        let pts = circle_polygon(&gaps[..n]);
         let mesh = HalfedgeMesh::new(n);
         let vs: Vec<u32> = (0..n as u32).collect();
         let quads = quadrangulate(&mesh, &pts, &vs, &vec![None; n], &CloseConfig::default()).unwrap();
@@ -133,15 +138,7 @@ proptest! {
         salt in any::<u64>(),
     ) {
         let n = 2 * half;
-        let sum: f64 = gaps[..n].iter().sum();
-        let mut t = 0.0;
-        let pts: Vec<[f64; 3]> = gaps[..n]
-            .iter()
-            .map(|g| {
-                t += g / sum * std::f64::consts::TAU;
-                [t.cos(), t.sin(), 0.0]
-            })
-            .collect();
+        let pts = circle_polygon(&gaps[..n]);
         let extra = |q: [usize; 4]| {
             let h = q.iter().fold(salt, |h, &v| (h ^ v as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
             (h >> 11) as f64 / (1u64 << 53) as f64 * 2.0

@@ -445,19 +445,8 @@ fn face_paths(
     let mut paths = Vec::new();
     for depth in 1..=max_faces {
         for &f in &frontier {
-            let hits = mesh
-                .face_halfedges(f)
-                .iter()
-                .any(|g| loop_of(mesh, id, g.opposite()).is_some_and(|m| m != l && want(m)));
-            if hits {
-                let mut path = vec![f];
-                let mut c = f;
-                while let Some(Some(p)) = parent.get(&c.0) {
-                    path.push(*p);
-                    c = *p;
-                }
-                path.reverse();
-                paths.push(path);
+            if touches_wanted_loop(mesh, id, f, l, want) {
+                paths.push(path_to(f, |c| parent.get(&c.0).copied().flatten()));
                 if paths.len() >= 32 {
                     return paths;
                 }
@@ -480,6 +469,29 @@ fn face_paths(
         frontier = next;
     }
     paths
+}
+
+/// Whether face `f` has an edge on a loop `m != l` with `want(m)` ([`loop_ids`] table `id`).
+fn touches_wanted_loop(
+    mesh: &HalfedgeMesh,
+    id: &[u32],
+    f: FaceId,
+    l: usize,
+    want: &dyn Fn(usize) -> bool,
+) -> bool {
+    mesh.face_halfedges(f).iter().any(|g| loop_of(mesh, id, g.opposite()).is_some_and(|m| m != l && want(m)))
+}
+
+/// The path of faces ending at `end`, from the first face with no `parent`.
+fn path_to(end: FaceId, parent: impl Fn(FaceId) -> Option<FaceId>) -> Vec<FaceId> {
+    let mut path = vec![end];
+    let mut c = end;
+    while let Some(p) = parent(c) {
+        path.push(p);
+        c = p;
+    }
+    path.reverse();
+    path
 }
 
 /// Scaled Jacobian of live face `f`.
@@ -817,24 +829,19 @@ pub fn seal(
         return;
     }
     let sup = |q: [u32; 4]| f64::from(support(corner_set(q))).clamp(0.0, 1.0);
+    let mut s = Sealer { mesh, pos, cfg, sup: &sup, report };
     for _pass in 0..4 {
         let mut loops: Vec<Vec<HalfedgeId>> =
-            mesh.boundary_loops().into_iter().filter(|l| l.len() <= cfg.seal_max_loop_edges).collect();
+            s.mesh.boundary_loops().into_iter().filter(|l| l.len() <= cfg.seal_max_loop_edges).collect();
         loops.sort_by_key(Vec::len);
         let mut changed = false;
         for lp in loops {
             // An earlier seal this pass may have changed this loop.
-            let unchanged = mesh.is_boundary(lp[0])
-                && walk_loop(mesh, lp[0], cfg.seal_max_loop_edges).is_some_and(|cur| cur == lp);
-            if !unchanged {
-                continue;
+            let unchanged = s.mesh.is_boundary(lp[0])
+                && walk_loop(s.mesh, lp[0], cfg.seal_max_loop_edges).is_some_and(|cur| cur == lp);
+            if unchanged {
+                changed |= if lp.len() % 2 == 1 { s.odd(&lp) } else { s.even(&lp) };
             }
-            let done = if lp.len() % 2 == 1 {
-                seal_odd(mesh, pos, cfg, &lp, &sup, report)
-            } else {
-                seal_even(mesh, pos, cfg, &lp, &sup, report)
-            };
-            changed |= done;
         }
         if !changed {
             break;
@@ -842,105 +849,95 @@ pub fn seal(
     }
 }
 
-/// [`seal`] for an odd loop (its half-edges); whether it was closed.
-fn seal_odd(
-    mesh: &mut HalfedgeMesh,
-    pos: &[[f64; 3]],
-    cfg: &CloseConfig,
-    lp: &[HalfedgeId],
-    sup: &dyn Fn([u32; 4]) -> f64,
-    report: &mut CloseReport,
-) -> bool {
-    let loops = mesh.boundary_loops();
-    let id = loop_ids(mesh, &loops);
-    let Some(l) = loop_of(mesh, &id, lp[0]) else { return false };
-    let odd = |m: usize| loops[m].len() % 2 == 1 && loops[m].len() <= cfg.seal_max_loop_edges;
-    let cost = |f: FaceId| 0.05 + sup(mesh.face_vertices(f).map(|v| v.0));
-    let paths = cheap_face_paths(mesh, &loops[l], l, &id, &odd, cfg.seal_max_path_faces, &cost);
-    for path in paths {
-        // Paths share faces, and a failed attempt puts faces back under new ids.
-        if path.len() <= cfg.seal_max_faces
-            && path.iter().all(|&f| mesh.is_face_alive(f))
-            && reclose(mesh, pos, cfg, &path, sup, report)
-        {
-            return true;
-        }
-    }
-    false
+/// The state [`seal`] works with.
+struct Sealer<'a> {
+    mesh: &'a mut HalfedgeMesh,
+    pos: &'a [[f64; 3]],
+    cfg: &'a CloseConfig,
+    /// Support of a quad (any corner order), in [0, 1].
+    sup: &'a dyn Fn([u32; 4]) -> f64,
+    report: &'a mut CloseReport,
 }
 
-/// [`seal`] for an even loop (its half-edges); whether it was closed.
-fn seal_even(
-    mesh: &mut HalfedgeMesh,
-    pos: &[[f64; 3]],
-    cfg: &CloseConfig,
-    lp: &[HalfedgeId],
-    sup: &dyn Fn([u32; 4]) -> f64,
-    report: &mut CloseReport,
-) -> bool {
-    // The vertices whose faces go: the loop's, then the corners of those faces. (Faces
-    // are listed afresh each ring: faces put back get new ids.)
-    let mut verts: Vec<VertexId> = lp.iter().map(|&h| mesh.from_vertex(h)).collect();
-    let mut last = 0;
-    for _ring in 0..cfg.seal_rings {
-        let mut region: Vec<FaceId> = Vec::new();
-        for &v in &verts {
-            for f in mesh.vertex_faces(v) {
-                if !region.contains(&f) {
-                    region.push(f);
+impl Sealer<'_> {
+    /// [`seal`] for an odd loop (its half-edges); whether it was closed.
+    fn odd(&mut self, lp: &[HalfedgeId]) -> bool {
+        let (mesh, cfg, sup) = (&*self.mesh, self.cfg, self.sup);
+        let loops = mesh.boundary_loops();
+        let id = loop_ids(mesh, &loops);
+        let Some(l) = loop_of(mesh, &id, lp[0]) else { return false };
+        let odd = |m: usize| loops[m].len() % 2 == 1 && loops[m].len() <= cfg.seal_max_loop_edges;
+        let cost = |f: FaceId| 0.05 + sup(mesh.face_vertices(f).map(|v| v.0));
+        let paths = cheap_face_paths(mesh, &loops[l], l, &id, &odd, cfg.seal_max_path_faces, &cost);
+        // Paths share faces, and a failed attempt puts faces back under new ids.
+        paths.into_iter().any(|path| {
+            path.len() <= cfg.seal_max_faces
+                && path.iter().all(|&f| self.mesh.is_face_alive(f))
+                && self.reclose(&path)
+        })
+    }
+
+    /// [`seal`] for an even loop (its half-edges); whether it was closed.
+    fn even(&mut self, lp: &[HalfedgeId]) -> bool {
+        // The vertices whose faces go: the loop's, then the corners of those faces.
+        // (Faces are listed afresh each ring: faces put back get new ids.)
+        let mut verts: Vec<VertexId> = lp.iter().map(|&h| self.mesh.from_vertex(h)).collect();
+        let mut last = 0;
+        for _ring in 0..self.cfg.seal_rings {
+            let mut region: Vec<FaceId> = Vec::new();
+            for &v in &verts {
+                for f in self.mesh.vertex_faces(v) {
+                    if !region.contains(&f) {
+                        region.push(f);
+                    }
                 }
             }
+            if region.len() == last || region.len() > self.cfg.seal_max_faces {
+                return false;
+            }
+            last = region.len();
+            verts = region.iter().flat_map(|&f| self.mesh.face_vertices(f)).collect();
+            verts.sort_unstable_by_key(|v| v.0);
+            verts.dedup();
+            if self.reclose(&region) {
+                return true;
+            }
         }
-        if region.len() == last || region.len() > cfg.seal_max_faces {
-            return false;
-        }
-        last = region.len();
-        verts = region.iter().flat_map(|&f| mesh.face_vertices(f)).collect();
-        verts.sort_unstable_by_key(|v| v.0);
-        verts.dedup();
-        if reclose(mesh, pos, cfg, &region, sup, report) {
-            return true;
-        }
+        false
     }
-    false
-}
 
-/// Takes `region` out and closes the one loop that leaves through its corners, as
-/// [`seal`] says; on failure the mesh is as before. Whether it closed.
-fn reclose(
-    mesh: &mut HalfedgeMesh,
-    pos: &[[f64; 3]],
-    cfg: &CloseConfig,
-    region: &[FaceId],
-    sup: &dyn Fn([u32; 4]) -> f64,
-    report: &mut CloseReport,
-) -> bool {
-    let mut corners: Vec<VertexId> = region.iter().flat_map(|&f| mesh.face_vertices(f)).collect();
-    corners.sort_unstable_by_key(|v| v.0);
-    corners.dedup();
-    let Some(out) = take_out(mesh, region) else { return false };
-    let had: f64 = out.iter().map(|c| sup(c.map(|v| v.0))).sum();
-    let added = the_one_loop(mesh, &corners, cfg.seal_max_loop_edges).and_then(|l| {
-        let vs: Vec<u32> = l.iter().map(|&h| mesh.from_vertex(h).0).collect();
-        let across: Vec<Option<[f64; 3]>> = l.iter().map(|&h| normal_across(mesh, pos, h)).collect();
-        if vs.len() % 2 == 1 || !is_hole(pos, &vs, &across, cfg) {
-            return None;
-        }
-        let extra = |q: [u32; 4]| cfg.seal_support_weight * (1.0 - sup(q));
-        let quads = quadrangulate_with(mesh, pos, &vs, &across, cfg, &extra)?;
-        let gets: f64 = quads.iter().map(|&q| sup(q)).sum();
-        (gets >= cfg.seal_keep_support * had - 1e-9 && add_all(mesh, &quads)).then_some(quads.len())
-    });
-    match added {
-        Some(n) => {
-            report.sealed += 1;
-            report.seal_removed += out.len();
-            report.seal_added += n;
-            true
-        }
-        None => {
-            put_back(mesh, &out);
-            false
+    /// Takes `region` out and closes the one loop that leaves through its corners, as
+    /// [`seal`] says; on failure the mesh is as before. Whether it closed.
+    fn reclose(&mut self, region: &[FaceId]) -> bool {
+        let (pos, cfg, sup) = (self.pos, self.cfg, self.sup);
+        let mut corners: Vec<VertexId> = region.iter().flat_map(|&f| self.mesh.face_vertices(f)).collect();
+        corners.sort_unstable_by_key(|v| v.0);
+        corners.dedup();
+        let Some(out) = take_out(self.mesh, region) else { return false };
+        let had: f64 = out.iter().map(|c| sup(c.map(|v| v.0))).sum();
+        let mesh = &mut *self.mesh;
+        let added = the_one_loop(mesh, &corners, cfg.seal_max_loop_edges).and_then(|l| {
+            let vs: Vec<u32> = l.iter().map(|&h| mesh.from_vertex(h).0).collect();
+            let across: Vec<Option<[f64; 3]>> = l.iter().map(|&h| normal_across(mesh, pos, h)).collect();
+            if vs.len() % 2 == 1 || !is_hole(pos, &vs, &across, cfg) {
+                return None;
+            }
+            let extra = |q: [u32; 4]| cfg.seal_support_weight * (1.0 - sup(q));
+            let quads = quadrangulate_with(mesh, pos, &vs, &across, cfg, &extra)?;
+            let gets: f64 = quads.iter().map(|&q| sup(q)).sum();
+            (gets >= cfg.seal_keep_support * had - 1e-9 && add_all(mesh, &quads)).then_some(quads.len())
+        });
+        match added {
+            Some(n) => {
+                self.report.sealed += 1;
+                self.report.seal_removed += out.len();
+                self.report.seal_added += n;
+                true
+            }
+            None => {
+                put_back(self.mesh, &out);
+                false
+            }
         }
     }
 }
@@ -1053,19 +1050,8 @@ fn cheap_face_paths(
             continue;
         }
         let face = FaceId(f);
-        let hits = mesh
-            .face_halfedges(face)
-            .iter()
-            .any(|g| loop_of(mesh, id, g.opposite()).is_some_and(|m| m != l && want(m)));
-        if hits {
-            let mut path = vec![face];
-            let mut cur = face;
-            while let Some(&(_, Some(p), _)) = best.get(&cur.0) {
-                path.push(p);
-                cur = p;
-            }
-            path.reverse();
-            paths.push(path);
+        if touches_wanted_loop(mesh, id, face, l, want) {
+            paths.push(path_to(face, |c| best.get(&c.0).and_then(|b| b.1)));
             if paths.len() >= 32 {
                 break;
             }

@@ -454,6 +454,37 @@ fn reconstruct_closing_options() {
     }
 }
 
+/// `--no-inverted-fills` leaves a 4-edge hole open rather than close it with an inverted
+/// quad, and `--no-seal` turns the seal off: both outputs are valid, the default one has
+/// inverted quads here and the first none, and neither has a shorter border than the
+/// default; the summary reports the seal.
+#[test]
+fn reconstruct_inverted_fills_and_seal_switches() {
+    let s = Scratch::new("inverted");
+    let cloud = s.p("cloud.xyz");
+    ok(&["synth", "--shape", "random", "-o", &cloud, "--noise", "0.1", "--seed", "4"]);
+    let metrics = |mesh: &str| {
+        let out = ok(&["eval", mesh, "--json"]);
+        let json = parse_json(String::from_utf8_lossy(&out.stdout).trim()).unwrap();
+        let q = point2quad::io::mesh_io::read_mesh(Path::new(mesh)).unwrap().to_quads().expect("pure quad");
+        validate(&HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).expect("manifold")).expect("valid");
+        let num = |k: &str| json.get(k).and_then(Json::num).unwrap();
+        (num("inverted_quads"), num("boundary_edges"))
+    };
+    let (full, no_inv, no_seal) = (s.p("full.obj"), s.p("no_inv.obj"), s.p("no_seal.obj"));
+    let out = ok(&["reconstruct", &cloud, "-o", &full]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("loops sealed"), "{err}");
+    ok(&["reconstruct", &cloud, "-o", &no_inv, "--no-inverted-fills"]);
+    ok(&["reconstruct", &cloud, "-o", &no_seal, "--no-seal"]);
+    let ((inv_full, b_full), (inv_no, b_no), (_, b_no_seal)) =
+        (metrics(&full), metrics(&no_inv), metrics(&no_seal));
+    assert!(inv_full > 0.0, "the case must have inverted fills");
+    assert_eq!(inv_no, 0.0);
+    assert!(b_no >= b_full, "{b_no} < {b_full}");
+    assert!(b_no_seal >= b_full, "{b_no_seal} < {b_full}");
+}
+
 /// `train --init`: a fine-tune starts from the given weights (their config, epoch 1 of
 /// its own count); a refined model's rounds are dropped with a message; combinations with
 /// --resume or --config are usage errors, a missing file a data error naming it. And

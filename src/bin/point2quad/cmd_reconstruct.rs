@@ -43,6 +43,9 @@ OPTIONS:
                           out the faces around each, or a path of faces to another
                           odd loop, and re-split the larger hole into quads the
                           classifier supports, when it does not lose support)
+    --no-inverted-fills   never close a 4-edge hole with a quad whose scaled Jacobian
+                          is under 0.02 (inverted or folded: the only quad its four
+                          corners make); such holes stay open (default: closed)
     --no-untangle         keep badly shaped faces (scaled Jacobian under 0.02:
                           inverted, folded) as they are (default: re-split each with
                           the faces next to it over the same vertices when that gives
@@ -60,7 +63,14 @@ const SPEC: Spec = Spec {
         "--max-floater-faces",
         "--rescue-min-prob",
     ],
-    switches: &["--no-postprocess", "--no-rescue", "--no-close", "--no-seal", "--no-untangle"],
+    switches: &[
+        "--no-postprocess",
+        "--no-rescue",
+        "--no-close",
+        "--no-seal",
+        "--no-inverted-fills",
+        "--no-untangle",
+    ],
 };
 
 /// The weights shipped with the project (`make train` writes them), embedded in the
@@ -96,6 +106,9 @@ pub fn run(argv: &[String]) -> Result<()> {
     pp.rescue.enabled = !a.switch("--no-rescue");
     pp.close.enabled = !a.switch("--no-close");
     pp.close.seal = !a.switch("--no-seal");
+    if a.switch("--no-inverted-fills") {
+        pp.hole_fill.loop4_min_scaled_jacobian = pp.close.min_scaled_jacobian;
+    }
     pp.close.untangle = !a.switch("--no-untangle");
     // Check the output names before the work, not after it.
     point2quad::io::mesh_io::MeshFormat::from_path(&out)?;

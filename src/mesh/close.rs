@@ -471,6 +471,13 @@ fn face_paths(
     paths
 }
 
+/// The live face whose corners are `c` in this cyclic order, if there is one.
+fn face_with_corners(mesh: &HalfedgeMesh, c: [VertexId; 4]) -> Option<FaceId> {
+    let f = mesh.face(mesh.find_halfedge(c[0], c[1])?)?;
+    let got = mesh.face_vertices(f);
+    (0..4).any(|k| (0..4).all(|j| got[(j + k) % 4] == c[j])).then_some(f)
+}
+
 /// Whether face `f` has an edge on a loop `m != l` with `want(m)` ([`loop_ids`] table `id`).
 fn touches_wanted_loop(
     mesh: &HalfedgeMesh,
@@ -868,12 +875,17 @@ impl Sealer<'_> {
         let Some(l) = loop_of(mesh, &id, lp[0]) else { return false };
         let odd = |m: usize| loops[m].len() % 2 == 1 && loops[m].len() <= cfg.seal_max_loop_edges;
         let cost = |f: FaceId| 0.05 + sup(mesh.face_vertices(f).map(|v| v.0));
-        let paths = cheap_face_paths(mesh, &loops[l], l, &id, &odd, cfg.seal_max_path_faces, &cost);
-        // Paths share faces, and a failed attempt puts faces back under new ids.
-        paths.into_iter().any(|path| {
-            path.len() <= cfg.seal_max_faces
-                && path.iter().all(|&f| self.mesh.is_face_alive(f))
-                && self.reclose(&path)
+        // By corners: a failed attempt puts its faces back under new ids (and a freed id
+        // may go to another face), so face ids do not outlive an attempt.
+        let paths: Vec<Vec<[VertexId; 4]>> =
+            cheap_face_paths(mesh, &loops[l], l, &id, &odd, cfg.seal_max_path_faces, &cost)
+                .into_iter()
+                .map(|p| p.iter().map(|&f| mesh.face_vertices(f)).collect())
+                .collect();
+        paths.into_iter().any(|corners| {
+            let path: Option<Vec<FaceId>> =
+                corners.iter().map(|&c| face_with_corners(self.mesh, c)).collect();
+            path.is_some_and(|p| p.len() <= cfg.seal_max_faces && self.reclose(&p))
         })
     }
 

@@ -410,6 +410,16 @@ fn refine_trains_rounds_that_reconstruct_reads() {
     assert!(!Path::new(&never).exists());
 }
 
+/// `point2quad eval MESH --json`'s figure `key`, after checking that `MESH` is a pure-quad
+/// mesh that passes the half-edge validator.
+fn valid_mesh_metric(mesh: &str, key: &str) -> f64 {
+    let out = ok(&["eval", mesh, "--json"]);
+    let json = parse_json(String::from_utf8_lossy(&out.stdout).trim()).unwrap();
+    let q = point2quad::io::mesh_io::read_mesh(Path::new(mesh)).unwrap().to_quads().expect("pure quad");
+    validate(&HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).expect("manifold")).expect("valid");
+    json.get(key).and_then(Json::num).unwrap()
+}
+
 /// The closing steps of the post-process: with the shipped weights on a noisy cloud of
 /// a random synthetic shape (one whose reconstruction has holes), the default leaves no more border than the greedy fill alone (each step only
 /// removes border), both outputs are valid, the summary says what was done, and bad
@@ -419,13 +429,7 @@ fn reconstruct_closing_options() {
     let s = Scratch::new("close");
     let cloud = s.p("cloud.xyz");
     ok(&["synth", "--shape", "random", "-o", &cloud, "--noise", "0.1", "--seed", "5"]);
-    let border = |mesh: &str| {
-        let out = ok(&["eval", mesh, "--json"]);
-        let json = parse_json(String::from_utf8_lossy(&out.stdout).trim()).unwrap();
-        let q = point2quad::io::mesh_io::read_mesh(Path::new(mesh)).unwrap().to_quads().expect("pure quad");
-        validate(&HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).expect("manifold")).expect("valid");
-        json.get("boundary_edges").and_then(Json::num).unwrap()
-    };
+    let border = |mesh: &str| valid_mesh_metric(mesh, "boundary_edges");
     let (full, plain) = (s.p("full.obj"), s.p("plain.obj"));
     let out = ok(&["reconstruct", &cloud, "-o", &full]);
     let err = String::from_utf8_lossy(&out.stderr);
@@ -463,14 +467,8 @@ fn reconstruct_inverted_fills_and_seal_switches() {
     let s = Scratch::new("inverted");
     let cloud = s.p("cloud.xyz");
     ok(&["synth", "--shape", "random", "-o", &cloud, "--noise", "0.1", "--seed", "4"]);
-    let metrics = |mesh: &str| {
-        let out = ok(&["eval", mesh, "--json"]);
-        let json = parse_json(String::from_utf8_lossy(&out.stdout).trim()).unwrap();
-        let q = point2quad::io::mesh_io::read_mesh(Path::new(mesh)).unwrap().to_quads().expect("pure quad");
-        validate(&HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).expect("manifold")).expect("valid");
-        let num = |k: &str| json.get(k).and_then(Json::num).unwrap();
-        (num("inverted_quads"), num("boundary_edges"))
-    };
+    let metrics =
+        |mesh: &str| (valid_mesh_metric(mesh, "inverted_quads"), valid_mesh_metric(mesh, "boundary_edges"));
     let (full, no_inv, no_seal) = (s.p("full.obj"), s.p("no_inv.obj"), s.p("no_seal.obj"));
     let out = ok(&["reconstruct", &cloud, "-o", &full]);
     let err = String::from_utf8_lossy(&out.stderr);

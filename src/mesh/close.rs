@@ -11,7 +11,7 @@
 //!   its chords, minimising Σ(1 − scaled Jacobian) under the hole filling's shape and fold
 //!   bounds; chords that are already edges of the mesh are not used.
 
-use super::halfedge::{corner_set, HalfedgeMesh};
+use super::halfedge::{corner_set, same_cycle, HalfedgeMesh};
 use super::handles::{FaceId, HalfedgeId, VertexId};
 use super::hole_fill::{quad_normal, scaled_jacobian};
 use super::quality::is_degenerate_quad;
@@ -276,15 +276,7 @@ fn normal_across(mesh: &HalfedgeMesh, pos: &[[f64; 3]], h: HalfedgeId) -> Option
 /// Closes the loop through boundary half-edge `start` by quadrangulation; on failure
 /// the mesh is unchanged. Returns the number of quads added (0 = not closed).
 fn close_loop(mesh: &mut HalfedgeMesh, pos: &[[f64; 3]], start: HalfedgeId, cfg: &CloseConfig) -> usize {
-    let mut lp = vec![start];
-    let mut h = mesh.next(start);
-    while h != start {
-        if lp.len() > cfg.max_loop_edges {
-            return 0;
-        }
-        lp.push(h);
-        h = mesh.next(h);
-    }
+    let Some(lp) = walk_loop(mesh, start, cfg.max_loop_edges + 1) else { return 0 };
     let vs: Vec<u32> = lp.iter().map(|&h| mesh.from_vertex(h).0).collect();
     let across: Vec<Option<[f64; 3]>> = lp.iter().map(|&h| normal_across(mesh, pos, h)).collect();
     if !is_hole(pos, &vs, &across, cfg) {
@@ -474,8 +466,7 @@ fn face_paths(
 /// The live face whose corners are `c` in this cyclic order, if there is one.
 fn face_with_corners(mesh: &HalfedgeMesh, c: [VertexId; 4]) -> Option<FaceId> {
     let f = mesh.face(mesh.find_halfedge(c[0], c[1])?)?;
-    let got = mesh.face_vertices(f);
-    (0..4).any(|k| (0..4).all(|j| got[(j + k) % 4] == c[j])).then_some(f)
+    same_cycle(mesh.face_vertices(f).map(|v| v.0), c.map(|v| v.0)).then_some(f)
 }
 
 /// Whether face `f` has an edge on a loop `m != l` with `want(m)` ([`loop_ids`] table `id`).
@@ -722,15 +713,7 @@ pub fn untangle_with_candidates(
         }
         frontier = next;
     }
-    let mut table: std::collections::HashMap<[u32; 4], f32> = std::collections::HashMap::new();
-    for (quads, probs) in lists {
-        for (q, &p) in quads.iter().zip(probs.iter()) {
-            if q.iter().all(|&v| near.get(v as usize).copied().unwrap_or(false)) {
-                let e = table.entry(corner_set(*q)).or_insert(p);
-                *e = e.max(p);
-            }
-        }
-    }
+    let table = support_table(&near, lists);
     untangle_faces(mesh, pos, cfg, bad, &|k| table.get(&k).copied().unwrap_or(0.0))
 }
 
@@ -749,28 +732,17 @@ fn walk_loop(mesh: &HalfedgeMesh, start: HalfedgeId, max: usize) -> Option<Vec<H
     Some(lp)
 }
 
-/// Takes the faces `region` out of `mesh`, each as soon as it can go (a face in the middle
-/// of a corner's open fan waits for its neighbours). Returns the corners of the faces
-/// taken out, in order; when not all could go, they are put back and `None` is returned.
+/// Takes the faces `region` out of `mesh` ([`HalfedgeMesh::remove_faces`]): the corners of
+/// the faces taken out, in order; when not all could go, they are put back and `None` is
+/// returned.
 fn take_out(mesh: &mut HalfedgeMesh, region: &[FaceId]) -> Option<Vec<[VertexId; 4]>> {
-    let mut left: Vec<FaceId> = region.to_vec();
-    let mut out: Vec<[VertexId; 4]> = Vec::with_capacity(region.len());
-    while !left.is_empty() {
-        let before = left.len();
-        left.retain(|&f| {
-            let c = mesh.face_vertices(f);
-            let gone = mesh.remove_face(f).is_ok();
-            if gone {
-                out.push(c);
-            }
-            !gone
-        });
-        if left.len() == before {
-            put_back(mesh, &out);
-            return None;
-        }
+    let out = mesh.remove_faces(region);
+    if out.len() == region.len() {
+        Some(out)
+    } else {
+        put_back(mesh, &out);
+        None
     }
-    Some(out)
 }
 
 /// Puts faces taken out by [`take_out`] back, last first.
@@ -870,15 +842,32 @@ impl Sealer<'_> {
     /// [`seal`] for an odd loop (its half-edges); whether it was closed.
     fn odd(&mut self, lp: &[HalfedgeId]) -> bool {
         let (mesh, cfg, sup) = (&*self.mesh, self.cfg, self.sup);
-        let loops = mesh.boundary_loops();
-        let id = loop_ids(mesh, &loops);
-        let Some(l) = loop_of(mesh, &id, lp[0]) else { return false };
-        let odd = |m: usize| loops[m].len() % 2 == 1 && loops[m].len() <= cfg.seal_max_loop_edges;
+        // Which boundary half-edges lie on another odd loop of at most
+        // `seal_max_loop_edges` edges: walked where the search meets them, each loop
+        // once, not listed for the whole mesh per loop sealed.
+        let mut other_odd: std::collections::HashMap<HalfedgeId, bool> = std::collections::HashMap::new();
+        let mut hits = |f: FaceId| {
+            mesh.face_halfedges(f).iter().any(|g| {
+                let h = g.opposite();
+                if !mesh.is_boundary(h) {
+                    return false;
+                }
+                if let Some(&known) = other_odd.get(&h) {
+                    return known;
+                }
+                let walked = walk_loop(mesh, h, cfg.seal_max_loop_edges);
+                let yes = walked.as_ref().is_some_and(|l| l.len() % 2 == 1 && !l.contains(&lp[0]));
+                for e in walked.unwrap_or_else(|| vec![h]) {
+                    other_odd.insert(e, yes);
+                }
+                yes
+            })
+        };
         let cost = |f: FaceId| 0.05 + sup(mesh.face_vertices(f).map(|v| v.0));
         // By corners: a failed attempt puts its faces back under new ids (and a freed id
         // may go to another face), so face ids do not outlive an attempt.
         let paths: Vec<Vec<[VertexId; 4]>> =
-            cheap_face_paths(mesh, &loops[l], l, &id, &odd, cfg.seal_max_path_faces, &cost)
+            cheap_face_paths(mesh, lp, &mut hits, cfg.seal_max_path_faces, &cost)
                 .into_iter()
                 .map(|p| p.iter().map(|&f| mesh.face_vertices(f)).collect())
                 .collect();
@@ -981,12 +970,11 @@ pub fn support_near_loops(
     rings: usize,
     lists: &[(&[[u32; 4]], &[f32])],
 ) -> std::collections::HashMap<[u32; 4], f32> {
-    let mut table = std::collections::HashMap::new();
     let mut near = vec![false; mesh.n_vertices()];
     let mut frontier: Vec<VertexId> =
         mesh.boundary_loops().iter().flatten().map(|&h| mesh.from_vertex(h)).collect();
     if frontier.is_empty() {
-        return table;
+        return std::collections::HashMap::new();
     }
     for &v in &frontier {
         near[v.idx()] = true;
@@ -1005,6 +993,13 @@ pub fn support_near_loops(
         }
         frontier = next;
     }
+    support_table(&near, lists)
+}
+
+/// For each quad of `lists` ((quads, probabilities) pairs) whose corners are all marked in
+/// `near`, its corner set and highest probability.
+fn support_table(near: &[bool], lists: &[(&[[u32; 4]], &[f32])]) -> std::collections::HashMap<[u32; 4], f32> {
+    let mut table = std::collections::HashMap::new();
     for (quads, probs) in lists {
         for (q, &p) in quads.iter().zip(probs.iter()) {
             if q.iter().all(|&v| near.get(v as usize).copied().unwrap_or(false)) {
@@ -1016,15 +1011,13 @@ pub fn support_near_loops(
     table
 }
 
-/// Paths of faces (at most `max_faces` long), each from a face across loop `l` to a face
-/// with an edge on a loop `m != l` with `want(m)`, moving across interior edges, in order
-/// of least total `cost` (Dijkstra; one path per end face, at most 32).
+/// Paths of faces (at most `max_faces` long), each from a face across the loop `lp` to a
+/// face where `hits` holds, moving across interior edges, in order of least total `cost`
+/// (Dijkstra; one path per end face, at most 32).
 fn cheap_face_paths(
     mesh: &HalfedgeMesh,
     lp: &[HalfedgeId],
-    l: usize,
-    id: &[u32],
-    want: &dyn Fn(usize) -> bool,
+    hits: &mut dyn FnMut(FaceId) -> bool,
     max_faces: usize,
     cost: &dyn Fn(FaceId) -> f64,
 ) -> Vec<Vec<FaceId>> {
@@ -1062,7 +1055,7 @@ fn cheap_face_paths(
             continue;
         }
         let face = FaceId(f);
-        if touches_wanted_loop(mesh, id, face, l, want) {
+        if hits(face) {
             paths.push(path_to(face, |c| best.get(&c.0).and_then(|b| b.1)));
             if paths.len() >= 32 {
                 break;

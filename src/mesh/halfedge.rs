@@ -189,6 +189,11 @@ pub fn corner_set(q: [u32; 4]) -> [u32; 4] {
     k
 }
 
+/// Whether quads `a` and `b` list the same corners in the same cyclic order (any start).
+pub fn same_cycle(a: [u32; 4], b: [u32; 4]) -> bool {
+    (0..4).any(|k| (0..4).all(|i| a[(i + k) % 4] == b[i]))
+}
+
 impl HalfedgeMesh {
     /// A mesh with `n_vertices` isolated vertices and no faces.
     pub fn new(n_vertices: usize) -> Self {
@@ -1085,6 +1090,30 @@ impl HalfedgeMesh {
 
     // ---- removing faces ---------------------------------------------------------------
 
+    /// Removes the live faces `fs`, each as soon as it can go: one in the middle of a
+    /// corner's open fan ([`HalfedgeMesh::remove_face`] refuses it) waits for the faces
+    /// around it. Returns the corners of the faces removed, in removal order; faces that
+    /// never could go stay (fewer corners than `fs` then).
+    pub fn remove_faces(&mut self, fs: &[FaceId]) -> Vec<[VertexId; 4]> {
+        let mut left: Vec<FaceId> = fs.to_vec();
+        let mut out: Vec<[VertexId; 4]> = Vec::with_capacity(fs.len());
+        while !left.is_empty() {
+            let before = left.len();
+            left.retain(|&f| {
+                let c = self.face_vertices(f);
+                let gone = self.remove_face(f).is_ok();
+                if gone {
+                    out.push(c);
+                }
+                !gone
+            });
+            if left.len() == before {
+                break;
+            }
+        }
+        out
+    }
+
     /// Removes face `f`; edges left without faces are deleted and corners left without
     /// faces become isolated.
     ///
@@ -1225,8 +1254,7 @@ mod tests {
     }
 
     fn same_cycle(a: [VertexId; 4], b: [u32; 4]) -> bool {
-        let a = a.map(|v| v.0);
-        (0..4).any(|k| (0..4).all(|i| a[(i + k) % 4] == b[i]))
+        super::same_cycle(a.map(|v| v.0), b)
     }
 
     #[test]

@@ -10,7 +10,7 @@ use std::collections::BinaryHeap;
 use super::close::{
     close_holes, seal, support_near_loops, untangle_with_candidates, CloseConfig, CloseReport,
 };
-use super::halfedge::{corner_set, HalfedgeMesh, InsertOutcome};
+use super::halfedge::{corner_set, same_cycle, HalfedgeMesh, InsertOutcome};
 use super::hole_fill::{fill_holes, quad_normal, HoleFillConfig, HoleFillReport};
 use super::poly::QuadMesh;
 use super::quality::is_degenerate_quad;
@@ -352,9 +352,8 @@ pub fn orient_components(
     let mut as_given = vec![0i8; mesh.face_capacity()];
     for f in mesh.faces() {
         let got = mesh.face_vertices(f).map(|v| v.0);
-        if let Some(q) = given.get(&corner_set(got)) {
-            let same = (0..4).any(|k| (0..4).all(|j| got[(j + k) % 4] == q[j]));
-            as_given[f.idx()] = if same { 1 } else { -1 };
+        if let Some(&q) = given.get(&corner_set(got)) {
+            as_given[f.idx()] = if same_cycle(got, q) { 1 } else { -1 };
         }
     }
     let mut flipped = 0;

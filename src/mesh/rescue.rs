@@ -57,29 +57,7 @@ pub fn remove_small_open_components(mesh: &mut HalfedgeMesh, max_faces: usize) -
         if !open {
             continue;
         }
-        removed += remove_all(mesh, &comp);
-    }
-    removed
-}
-
-/// Removes the faces `fs` (one component), retrying those whose removal would split a
-/// corner's fan until the faces around them are gone. Returns how many it removed.
-fn remove_all(mesh: &mut HalfedgeMesh, fs: &[FaceId]) -> usize {
-    let mut left: Vec<FaceId> = fs.to_vec();
-    let mut removed = 0;
-    while !left.is_empty() {
-        let before = left.len();
-        left.retain(|&f| {
-            if mesh.remove_face(f).is_ok() {
-                removed += 1;
-                false
-            } else {
-                true
-            }
-        });
-        if left.len() == before {
-            break; // cannot happen for a whole component; never loop forever
-        }
+        removed += mesh.remove_faces(&comp).len();
     }
     removed
 }

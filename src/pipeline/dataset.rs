@@ -30,6 +30,7 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::error::{Error, Result};
+use crate::math::{add, dot, scale};
 use crate::mesh::poly::QuadMesh;
 use crate::mesh::shapes::{self, Family};
 use crate::pipeline::candidates::{self, CandidateConfig};
@@ -161,14 +162,7 @@ pub fn stretch_mesh(mesh: &QuadMesh, max_factor: f64, rng: &mut Rng) -> Result<(
     }
     let a = rng.rotation()[0];
     let f = rng.uniform(1.0, max_factor);
-    let vertices = mesh
-        .vertices
-        .iter()
-        .map(|v| {
-            let d = (f - 1.0) * (v[0] * a[0] + v[1] * a[1] + v[2] * a[2]);
-            [v[0] + d * a[0], v[1] + d * a[1], v[2] + d * a[2]]
-        })
-        .collect();
+    let vertices = mesh.vertices.iter().map(|&v| add(v, scale(a, (f - 1.0) * dot(v, a)))).collect();
     Ok((QuadMesh { vertices, quads: mesh.quads.clone() }, a, f))
 }
 

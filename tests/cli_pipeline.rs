@@ -131,6 +131,11 @@ fn synth_dataset_train_reconstruct_eval_end_to_end() {
     let raw = s.p("raw.off");
     ok(&["reconstruct", &cloud, "-o", &raw, "--model", &model, "--no-postprocess", "--threshold", "0.3"]);
     assert!(Path::new(&raw).is_file());
+    // An ensemble of two copies of one model averages equal probabilities: the same mesh.
+    let (one, two) = (s.p("one.obj"), s.p("two.obj"));
+    ok(&["reconstruct", &cloud, "-o", &one, "--model", &model, "--threshold", "0.3"]);
+    ok(&["reconstruct", &cloud, "-o", &two, "--model", &format!("{model},{model}"), "--threshold", "0.3"]);
+    assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&two).unwrap());
 }
 
 #[test]
@@ -162,6 +167,16 @@ fn reconstruct_rejects_bad_model_files_and_writes_nothing() {
             "{name}: output left behind"
         );
     }
+    // An ensemble member that is broken is named; an empty name in the list is a usage error.
+    std::fs::write(s.p("cut.p2qm"), &good[..good.len() / 2]).unwrap();
+    let err = fails(
+        &["reconstruct", &cloud, "-o", &s.p("never.obj"), "--model", &format!("{model},{}", s.p("cut.p2qm"))],
+        1,
+    );
+    assert!(err.contains("cut.p2qm"), "{err}");
+    let err = fails(&["reconstruct", &cloud, "-o", &s.p("never.obj"), "--model", &format!("{model},")], 2);
+    assert!(err.contains("empty name"), "{err}");
+    assert!(!Path::new(&s.p("never.obj")).exists());
     // A model file that does not exist, and a folder.
     let err = fails(&["reconstruct", &cloud, "-o", &s.p("never.obj"), "--model", &s.p("missing.p2qm")], 1);
     assert!(err.contains("missing.p2qm"), "{err}");

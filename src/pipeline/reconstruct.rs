@@ -83,6 +83,36 @@ pub fn reconstruct_with_report(
     model: &Model,
     cfg: &ReconstructConfig,
 ) -> Result<(QuadMesh, ReconstructReport)> {
+    reconstruct_ensemble_with_report(points, &[model], cfg)
+}
+
+/// [`reconstruct`] with an ensemble: every member scores the same candidates (its
+/// classifier, then its own refinement rounds) and a candidate's probability is the
+/// mean of the members'. One member is exactly [`reconstruct`].
+///
+/// # Errors
+/// As [`reconstruct`], and `Error::InvalidInput` for an empty ensemble.
+pub fn reconstruct_ensemble(
+    points: &[[f64; 3]],
+    models: &[&Model],
+    cfg: &ReconstructConfig,
+) -> Result<QuadMesh> {
+    reconstruct_ensemble_with_report(points, models, cfg).map(|(m, _)| m)
+}
+
+/// [`reconstruct_ensemble`], also returning what each stage did and its time (the
+/// classify and refine stages summed over the members).
+///
+/// # Errors
+/// As [`reconstruct_ensemble`].
+pub fn reconstruct_ensemble_with_report(
+    points: &[[f64; 3]],
+    models: &[&Model],
+    cfg: &ReconstructConfig,
+) -> Result<(QuadMesh, ReconstructReport)> {
+    if models.is_empty() {
+        return Err(Error::invalid("an ensemble needs at least one model"));
+    }
     if !(cfg.threshold >= 0.0 && cfg.threshold < 1.0) {
         return Err(Error::invalid(format!("threshold {} must be in [0, 1)", cfg.threshold)));
     }
@@ -110,22 +140,48 @@ pub fn reconstruct_with_report(
     let cands = generate(&local, &cfg.candidates)?;
     report.candidates = cands.len();
     clock.lap(&mut report, "candidates");
-    let x = face_input(&local, &cands, model.config().use_context);
-    clock.lap(&mut report, "features");
-    // The point encoder (if the model has one) reads the same normalised cloud the
-    // candidates were built in, as in training.
-    let base = model.predict_base(&local, &cands.quads, &x)?;
-    clock.lap(&mut report, "classify");
-    // Refinement rounds (when the model has them) rescore every candidate by its
-    // rivals and neighbours: the same as `predict_with_points`, timed apart.
-    let probs = match model.refiner() {
-        Some(r) => {
-            let p = r.apply(&model.params, &local, &cands.quads, &base)?;
-            clock.lap(&mut report, "refine");
-            p
+    // The face input depends on the model only through `use_context`: built once
+    // per value the members need.
+    let mut inputs: [Option<Vec<f32>>; 2] = [None, None];
+    for m in models {
+        let ctx = m.config().use_context;
+        if inputs[ctx as usize].is_none() {
+            inputs[ctx as usize] = Some(face_input(&local, &cands, ctx));
         }
-        None => base,
-    };
+    }
+    clock.lap(&mut report, "features");
+    let (mut t_classify, mut t_refine) = (0.0, None);
+    let mut probs: Vec<f32> = Vec::new();
+    for model in models {
+        let x = inputs[model.config().use_context as usize].as_deref().unwrap_or_default();
+        // The point encoder (if the model has one) reads the same normalised cloud the
+        // candidates were built in, as in training.
+        let base = model.predict_base(&local, &cands.quads, x)?;
+        t_classify += clock.split();
+        // Refinement rounds (when the model has them) rescore every candidate by its
+        // rivals and neighbours: the same as `predict_with_points`, timed apart.
+        let p = match model.refiner() {
+            Some(r) => {
+                let p = r.apply(&model.params, &local, &cands.quads, &base)?;
+                *t_refine.get_or_insert(0.0) += clock.split();
+                p
+            }
+            None => base,
+        };
+        if probs.is_empty() {
+            probs = p;
+        } else {
+            probs.iter_mut().zip(&p).for_each(|(a, b)| *a += b);
+        }
+    }
+    if models.len() > 1 {
+        let inv = 1.0 / models.len() as f32;
+        probs.iter_mut().for_each(|a| *a *= inv);
+    }
+    clock.record(&mut report, "classify", t_classify);
+    if let Some(t) = t_refine {
+        clock.record(&mut report, "refine", t);
+    }
     let mut faces = Vec::new();
     let mut face_probs = Vec::new();
     // The rest of the candidates: the post-process may rescue them at holes.
@@ -203,14 +259,24 @@ impl Clock {
     }
     /// Records the time since the last lap (0 on wasm32, which has no clock).
     fn lap(&mut self, report: &mut ReconstructReport, stage: &'static str) {
+        let t = self.split();
+        self.record(report, stage, t);
+    }
+    /// Seconds since the last lap or split, restarting the count (0 on wasm32).
+    fn split(&mut self) -> f64 {
         #[cfg(not(target_arch = "wasm32"))]
         {
             let now = std::time::Instant::now();
-            report.timings.push((stage, (now - self.t).as_secs_f64()));
+            let t = (now - self.t).as_secs_f64();
             self.t = now;
+            t
         }
         #[cfg(target_arch = "wasm32")]
-        report.timings.push((stage, 0.0));
+        0.0
+    }
+    /// Records a stage's time, measured by [`Clock::split`]s.
+    fn record(&mut self, report: &mut ReconstructReport, stage: &'static str, seconds: f64) {
+        report.timings.push((stage, seconds));
     }
 }
 
@@ -256,6 +322,43 @@ mod tests {
         let few: Vec<[f64; 3]> = (0..30).map(|i| [(i % 3) as f64, 0.0, (i % 3 == 1) as u8 as f64]).collect();
         let e = reconstruct(&few, &model, &cfg).unwrap_err().to_string();
         assert!(e.contains("3 distinct point(s) (of 30)"), "{e}");
+    }
+
+    /// An ensemble keeps (without the post-process) exactly the candidates whose mean
+    /// probability over the members, each computed alone by `predict_with_points` on
+    /// the normalised cloud, is above the threshold; two copies of one model are that
+    /// model; an empty ensemble is an error.
+    #[test]
+    fn an_ensemble_thresholds_the_members_mean_probability() {
+        let a = Model::new(ModelConfig::default_preset(), 7).expect("test: model a");
+        let b = Model::new(ModelConfig::default_preset(), 8).expect("test: model b");
+        let pts: Vec<[f64; 3]> = shapes::torus(10, 6, 2.0, 0.7)
+            .vertices
+            .iter()
+            .map(|p| [p[0] * 3.0 + 1.0, p[1], p[2] - 2.0])
+            .collect();
+        let cfg = ReconstructConfig { run_postprocess: false, threshold: 0.5, ..Default::default() };
+        let frame = Frame::fit(&pts).expect("frame");
+        let local = frame.to_local_all(&pts);
+        let cands = generate(&local, &cfg.candidates).expect("candidates");
+        let prob = |m: &Model| {
+            let x = face_input(&local, &cands, m.config().use_context);
+            m.predict_with_points(&local, &cands.quads, &x).expect("probabilities")
+        };
+        let (pa, pb) = (prob(&a), prob(&b));
+        let kept = |p: &[f32]| -> Vec<[u32; 4]> {
+            cands.quads.iter().zip(p).filter(|(_, &p)| p > cfg.threshold).map(|(q, _)| *q).collect()
+        };
+        let mean: Vec<f32> = pa.iter().zip(&pb).map(|(x, y)| (x + y) * 0.5).collect();
+        let (ka, kb, km) = (kept(&pa), kept(&pb), kept(&mean));
+        assert!(ka != kb, "the two members keep the same candidates; the test cannot tell them apart");
+        let ens = reconstruct_ensemble(&pts, &[&a, &b], &cfg).expect("ensemble");
+        assert_eq!(ens.quads, km);
+        let twice = reconstruct_ensemble(&pts, &[&a, &a], &cfg).expect("twice");
+        assert_eq!(twice.quads, ka);
+        assert_eq!(reconstruct(&pts, &a, &cfg).expect("alone").quads, ka);
+        let e = reconstruct_ensemble(&pts, &[], &cfg).unwrap_err().to_string();
+        assert!(e.contains("at least one model"), "{e}");
     }
 
     /// Regression: a library caller's `k = 100000` was only capped by the cloud size

@@ -6,7 +6,7 @@ use point2quad::io::mesh_io::write_mesh;
 use point2quad::io::points::read_points;
 use point2quad::mesh::poly::PolyMesh;
 use point2quad::pipeline::model::Model;
-use point2quad::pipeline::reconstruct::{reconstruct_with_report, ReconstructConfig};
+use point2quad::pipeline::reconstruct::{reconstruct_ensemble_with_report, ReconstructConfig};
 use point2quad::{Error, Result};
 use std::path::{Path, PathBuf};
 
@@ -23,7 +23,9 @@ vertices), then any vertices hole filling added.
 
 OPTIONS:
     -o, --output OUT      output mesh; format from the extension (required)
-    --model FILE          weights written by `point2quad train`, any preset
+    --model FILE[,FILE…]  weights written by `point2quad train`, any preset; with
+                          several (comma-separated), an ensemble: each scores every
+                          candidate and their probabilities are averaged
                           [the shipped weights]
     --svg PREVIEW.svg     also write a shaded SVG picture of the result
     --no-postprocess      write the faces the network predicts, unrepaired
@@ -82,6 +84,21 @@ pub fn shipped_model() -> Result<Model> {
     Model::from_bytes(SHIPPED_WEIGHTS, Path::new("<shipped fixtures/point2quad-default.p2qm>"))
 }
 
+/// `--model`'s value: one weights file, or (when no file has that name) a
+/// comma-separated list of them, an ensemble.
+fn load_models(cmd: &str, value: &str) -> Result<Vec<Model>> {
+    if value.is_empty() || Path::new(value).exists() || !value.contains(',') {
+        return Ok(vec![Model::load(Path::new(value))?]);
+    }
+    let names: Vec<&str> = value.split(',').collect();
+    if names.iter().any(|n| n.is_empty()) {
+        return Err(Error::Usage(format!(
+            "{cmd}: --model {value}: an empty name in the list (FILE[,FILE…]; see `point2quad {cmd} --help`)"
+        )));
+    }
+    names.iter().map(|n| Model::load(Path::new(n))).collect()
+}
+
 pub fn run(argv: &[String]) -> Result<()> {
     let cmd = "reconstruct";
     let a = Args::parse(cmd, argv, &SPEC)?;
@@ -129,12 +146,13 @@ pub fn run(argv: &[String]) -> Result<()> {
     if let Some(svg) = svg {
         crate::output::check_output_path(svg)?;
     }
-    let model = match a.value("--model") {
-        Some(m) => Model::load(Path::new(m))?,
-        None => shipped_model()?,
+    let models = match a.value("--model") {
+        Some(m) => load_models(cmd, m)?,
+        None => vec![shipped_model()?],
     };
+    let members: Vec<&Model> = models.iter().collect();
     // The library's refusals (too few points, no extent…) do not know the file.
-    let (mesh, rep) = reconstruct_with_report(&points, &model, &cfg).map_err(|e| match e {
+    let (mesh, rep) = reconstruct_ensemble_with_report(&points, &members, &cfg).map_err(|e| match e {
         Error::InvalidInput(m) => Error::invalid(format!("{}: {m}", input.display())),
         other => other,
     })?;

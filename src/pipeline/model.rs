@@ -528,14 +528,25 @@ impl Model {
 
     /// The classifier's probabilities of a model without point encoder (no refinement).
     fn classify(&self, face_features: &[f32]) -> Result<Vec<f32>> {
+        self.classify_in_chunks(face_features, CLASSIFY_CHUNK_ROWS)
+    }
+
+    /// [`Model::classify`] over at most `chunk` rows at a time: in inference mode every
+    /// row is scored on its own (batch norm reads its running statistics), so the
+    /// result does not depend on the chunking, and memory holds one chunk's
+    /// activations instead of every candidate's (a 200,000-point cloud has 1.6M
+    /// candidates).
+    fn classify_in_chunks(&self, face_features: &[f32], chunk: usize) -> Result<Vec<f32>> {
         let m = self.rows(face_features)?;
-        if m == 0 {
-            return Ok(Vec::new());
+        let fin = self.net.config.face_in();
+        let mut out = Vec::with_capacity(m);
+        for rows in face_features.chunks(chunk.max(1) * fin) {
+            let mut g = Graph::eval_shared(&self.params);
+            let x = g.input(Tensor::new(&[rows.len() / fin, fin], self.framed(rows.to_vec()))?);
+            let logits = self.net.forward(&mut g, x, None)?;
+            out.extend(probabilities(g.value(logits).data()));
         }
-        let mut g = Graph::eval_shared(&self.params);
-        let x = g.input(Tensor::new(&[m, self.net.config.face_in()], self.framed(face_features.to_vec()))?);
-        let logits = self.net.forward(&mut g, x, None)?;
-        Ok(probabilities(g.value(logits).data()))
+        Ok(out)
     }
 
     /// Probability that each candidate is a real face, in inference mode, for any
@@ -717,6 +728,10 @@ impl Model {
         Model::from_checkpoint(&checkpoint::load(path)?, path)
     }
 }
+
+/// Rows the classifier scores at a time in inference ([`Model::classify`]): a multiple
+/// of the GEMM's row block, so chunking changes no bit of the result.
+const CLASSIFY_CHUNK_ROWS: usize = 64 * crate::tensor::gemm::ROW_BLOCK;
 
 /// `InvalidInput` naming the first candidate with a corner index `>= n_points`.
 pub(crate) fn check_corners(corners: &[[u32; 4]], n_points: usize) -> Result<()> {
@@ -957,6 +972,33 @@ mod tests {
         ] {
             assert!(kp.contains(from), "{from}");
             assert!(ModelConfig::from_text(&kp.replace(from, to), p).is_err(), "{to}");
+        }
+    }
+
+    /// Scoring in chunks of whole GEMM row blocks gives bit-identical probabilities
+    /// (inference scores each row on its own, and the products run in the same blocks);
+    /// any other chunking agrees to float rounding (a block under 6 rows takes the plain
+    /// loop instead of the SIMD kernel). For any number of rows, none included.
+    #[test]
+    fn chunked_classification_equals_one_batch() {
+        use crate::tensor::gemm::ROW_BLOCK;
+        const _: () = assert!(CLASSIFY_CHUNK_ROWS % ROW_BLOCK == 0);
+        let mut rng = Rng::new(3);
+        let model = Model::new(ModelConfig::default_preset(), 5).unwrap();
+        let fin = model.config().face_in();
+        for m in [0usize, 1, 5, 33, 1500] {
+            let x: Vec<f32> = (0..m * fin).map(|_| rng.f32() * 2.0 - 1.0).collect();
+            let whole = model.classify_in_chunks(&x, usize::MAX / fin).unwrap();
+            assert_eq!(whole.len(), m);
+            for chunk in [ROW_BLOCK, 2 * ROW_BLOCK] {
+                assert_eq!(model.classify_in_chunks(&x, chunk).unwrap(), whole, "m {m}, chunk {chunk}");
+            }
+            for chunk in [1, 7, 33] {
+                let got = model.classify_in_chunks(&x, chunk).unwrap();
+                assert_eq!(got.len(), m);
+                let worst = got.iter().zip(&whole).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+                assert!(worst <= 1e-6, "m {m}, chunk {chunk}: {worst}");
+            }
         }
     }
 

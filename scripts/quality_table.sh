@@ -3,6 +3,7 @@
 # cloud (its vertices + NOISE × #vertices noise points, seed 1), reconstruct, and
 # compare with the ground truth. Prints one markdown row per mesh and the means.
 #   scripts/quality_table.sh BIN MESH_DIR [NOISE] [MODEL] [OUTDIR]
+# MODEL is a weights file, or a comma list of them (an ensemble: reconstruct --model A,B).
 # Extra reconstruct options can be given in RECONSTRUCT_ARGS (e.g. "--threshold 0.7").
 # Example: scripts/quality_table.sh target/release/point2quad ../shared/data/quads/eval 0.1
 set -euo pipefail

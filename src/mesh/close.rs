@@ -778,7 +778,7 @@ fn add_all(mesh: &mut HalfedgeMesh, quads: &[[u32; 4]]) -> bool {
 }
 
 /// Closes the loops that the closing left open where the faces around them are the
-/// trouble (not in the paper; README "Session 12"):
+/// trouble (not in the paper; docs/EXPERIMENTS.md, "Session 12"):
 /// - an **odd** loop is joined to another odd loop by taking out a path of at most
 ///   `cfg.seal_max_path_faces` faces between them, the least supported path first
 ///   (Dijkstra over faces, each costing 0.05 + its support);

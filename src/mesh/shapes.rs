@@ -856,7 +856,7 @@ fn quad_sj(verts: &[[f64; 3]], q: &[u32; 4]) -> f64 {
 ///
 /// Real quad meshes of organic shapes (remeshed scans) have faces with scaled Jacobians
 /// of 0.8–0.95 and uneven corners, where the parametric families are nearly square. (As
-/// training data it did not pay: session 7 measured it in the README's "Training recipe".
+/// training data it did not pay: session 7 measured it in docs/EXPERIMENTS.md, "Training experiments".
 /// It stays as a test-shape utility.)
 /// Two draws from `rng` per vertex whatever is kept, so the stream does not depend on
 /// the geometry. Vertices without a face or a tangent plane stay.

@@ -1,5 +1,5 @@
 //! Refinement of the classifier's probabilities by the candidates' neighbourhood (our
-//! addition to the paper; README, "Session 5: refinement rounds").
+//! addition to the paper; docs/EXPERIMENTS.md, "End to end: session 4 … and session 5").
 //!
 //! The classifier scores every candidate on its own. Whether a candidate is a face
 //! depends on its rivals too: in a manifold, consistently oriented quad mesh a directed

@@ -817,3 +817,26 @@ fn dataset_stretch_adds_stretched_copies_that_split_with_their_meshes() {
     let bad = ["1", "0.5", "10.5", "nan", "x", "2,,3", "2,2,2,2,2,2,2,2,2"];
     copy_option_refuses(&s, &meshes, "--stretch", &bad, "2");
 }
+
+/// A `.csv` cloud with a header row reads as the same points as its `.xyz` form, so
+/// `reconstruct` writes the same mesh; `synth` refuses to write space-separated text
+/// under a `.csv` name.
+#[test]
+fn a_csv_cloud_with_a_header_reads_like_its_xyz() {
+    let s = Scratch::new("csv");
+    let xyz = s.p("cloud.xyz");
+    ok(&["synth", "--shape", "torus", "--seed", "3", "-o", &xyz]);
+    let text = std::fs::read_to_string(&xyz).unwrap();
+    let rows: Vec<String> =
+        text.lines().map(|l| l.split_whitespace().collect::<Vec<_>>().join(",")).collect();
+    let csv = s.write("cloud.csv", format!("\"x\",\"y\",\"z\"\r\n{}\r\n", rows.join("\r\n")).as_bytes());
+    let (a, b) = (s.p("a.obj"), s.p("b.obj"));
+    ok(&["reconstruct", &xyz, "-o", &a]);
+    ok(&["reconstruct", &csv, "-o", &b]);
+    let (ma, mb) = (std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    assert!(ma.len() > 1000 && String::from_utf8_lossy(&ma).contains("\nf "), "no faces written");
+    assert_eq!(ma, mb, "the .csv cloud gave another mesh than its .xyz form");
+    let err = fails(&["synth", "--shape", "torus", "-o", &s.p("c.csv")], 2);
+    assert!(err.contains("c.csv") && err.contains(".xyz, .txt or .pts"), "{err}");
+    assert!(!s.path("c.csv").exists());
+}

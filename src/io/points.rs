@@ -1,4 +1,4 @@
-//! Point clouds: read from .xyz/.txt/.pts (text columns), .ply, .obj and .off
+//! Point clouds: read from .xyz/.txt/.pts/.csv (text columns), .ply, .obj and .off
 //! (their vertices), write as .xyz with round-trip-exact coordinates.
 
 use super::atomic::write_atomic;
@@ -11,7 +11,7 @@ use std::path::Path;
 /// A point file format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum PointFormat {
-    /// Text columns `x y z [more…]` (`.xyz`, `.txt`, `.pts`).
+    /// Text columns `x y z [more…]` (`.xyz`, `.txt`, `.pts`, `.csv`).
     Xyz,
     /// Stanford PLY, the `vertex` element.
     Ply,
@@ -23,19 +23,19 @@ pub enum PointFormat {
 
 impl PointFormat {
     /// The format named by `path`'s extension (case-insensitive): `.xyz`, `.txt`,
-    /// `.pts` → `Xyz`; `.ply`, `.obj`, `.off`.
+    /// `.pts`, `.csv` → `Xyz`; `.ply`, `.obj`, `.off`.
     ///
     /// # Errors
     /// `Usage` naming the path and listing the supported extensions.
     pub fn from_path(path: &Path) -> Result<PointFormat> {
         let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
         match ext.as_deref() {
-            Some("xyz" | "txt" | "pts") => Ok(PointFormat::Xyz),
+            Some("xyz" | "txt" | "pts" | "csv") => Ok(PointFormat::Xyz),
             Some("ply") => Ok(PointFormat::Ply),
             Some("obj") => Ok(PointFormat::Obj),
             Some("off") => Ok(PointFormat::Off),
             _ => Err(Error::Usage(format!(
-                "{}: unknown point format; supported extensions: .xyz .txt .pts .ply .obj .off",
+                "{}: unknown point format; supported extensions: .xyz .txt .pts .csv .ply .obj .off",
                 path.display()
             ))),
         }
@@ -58,7 +58,9 @@ pub fn read_points(path: &Path) -> Result<Vec<[f64; 3]>> {
 /// `.xyz`: one point per line, columns separated by whitespace and/or commas; `#`
 /// starts a comment; blank lines are skipped; columns after the third (normals,
 /// colours…) are ignored. A first data line holding a single integer is a point
-/// count (the `.pts` convention) and must match the number of points. For mesh
+/// count (the `.pts` convention) and must match the number of points. A first data
+/// line of at least 3 column names (each starting with a letter or `_`, none of them a
+/// number, so `nan` or `inf` are not names) is a CSV-style header and is skipped. For mesh
 /// formats only the vertices are taken (faces are not read, except that PLY
 /// still checks every element's length).
 ///
@@ -89,6 +91,9 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
         let Some(t0) = toks.next() else { continue };
         if first {
             first = false;
+            if is_column_header(raw) {
+                continue;
+            }
             if toks.clone().next().is_none() {
                 // A lone first value: the `.pts` point count.
                 match parse_i64(t0).and_then(|n| usize::try_from(n).ok()) {
@@ -129,6 +134,25 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
     Ok(points)
 }
 
+/// A line of at least 3 column names, `x,y,z`, `"x","y","z"` or `X Y Z nx ny nz`: every
+/// token (without its double quotes) starts with an ASCII letter or `_` and none parses
+/// as a number (`nan`, `inf` do).
+fn is_column_header(line: &[u8]) -> bool {
+    let mut count = 0;
+    for tok in Tokens::with_commas(line) {
+        let tok = match tok {
+            [b'"', inner @ .., b'"'] => inner,
+            _ => tok,
+        };
+        let named = tok.first().is_some_and(|&c| c.is_ascii_alphabetic() || c == b'_');
+        if !named || text::parse_f64(tok).is_some() {
+            return false;
+        }
+        count += 1;
+    }
+    count >= 3
+}
+
 /// Writes points as `.xyz` text (`x y z` per line), atomically; every coordinate
 /// reads back bit-exactly (sign of zero, subnormals and extremes included).
 ///
@@ -166,6 +190,7 @@ mod tests {
             ("a.XYZ", PointFormat::Xyz),
             ("a.txt", PointFormat::Xyz),
             ("a.Pts", PointFormat::Xyz),
+            ("a.CSV", PointFormat::Xyz),
             ("a.ply", PointFormat::Ply),
             ("a.obj", PointFormat::Obj),
             ("a.OFF", PointFormat::Off),
@@ -173,7 +198,7 @@ mod tests {
             assert_eq!(PointFormat::from_path(Path::new(p)).unwrap(), f, "{p}");
         }
         let e = PointFormat::from_path(Path::new("x.las")).unwrap_err().to_string();
-        assert!(e.contains("x.las") && e.contains(".xyz .txt .pts .ply .obj .off"), "{e}");
+        assert!(e.contains("x.las") && e.contains(".xyz .txt .pts .csv .ply .obj .off"), "{e}");
     }
 
     #[test]
@@ -192,6 +217,30 @@ mod tests {
         assert_eq!(p, vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]]);
     }
 
+    /// A CSV-style first line of column names is skipped; only the first data line, and
+    /// only when every token is a name.
+    #[test]
+    fn a_column_header_row_is_skipped() {
+        let want = vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]];
+        for src in [
+            &b"x,y,z\n1,2,3\n4,5,6\n"[..],
+            b"# scan 3\n\nX Y Z nx ny nz\n1 2 3 0 0 1\n4 5 6 0 0 1\n",
+            b"\"x\",\"y\",\"z\"\n1,2,3\n4,5,6\n",
+            b"_x, pos_y, z1, intensity\n1, 2, 3, 7\n4, 5, 6, 7\n",
+        ] {
+            let got = parse_points(src, PointFormat::Xyz, "t.csv");
+            assert_eq!(got.unwrap(), want, "{}", String::from_utf8_lossy(src));
+        }
+        // Not headers: an empty quoted name, a quoted number.
+        for (src, want) in [
+            (&b"\"\",y,z\n1,2,3\n"[..], "t.csv:1: point 0: bad number '\"\"'"),
+            (b"\"1\",y,z\n1,2,3\n", "t.csv:1: point 0: bad number '\"1\"'"),
+        ] {
+            let e = parse_points(src, PointFormat::Xyz, "t.csv").unwrap_err().to_string();
+            assert!(e.contains(want), "got '{e}', want '{want}'");
+        }
+    }
+
     #[test]
     fn pts_count_header_is_checked() {
         let p = parse_points(b"2\n1 2 3\n4 5 6\n", PointFormat::Xyz, "t.pts").unwrap();
@@ -205,7 +254,12 @@ mod tests {
         let cases: &[(&[u8], &str)] = &[
             (b"1 2 3\n4 5\n", "t.xyz:2: point 1: needs 3 coordinates, found 2"),
             (b"1 2 3\n4\n", "t.xyz:2: point 1: needs 3 coordinates, found 1"),
-            (b"x y z\n1 2 3\n", "t.xyz:1: point 0: bad number 'x'"),
+            (b"1 2 3\nx y z\n", "t.xyz:2: point 1: bad number 'x'"),
+            (b"x y\n1 2 3\n", "t.xyz:1: point 0: bad number 'x'"),
+            (b"x 2 z\n1 2 3\n", "t.xyz:1: point 0: bad number 'x'"),
+            (b"x y 3z\n1 2 3\n", "t.xyz:1: point 0: bad number 'x'"),
+            (b"nan nan nan\n1 2 3\n", "t.xyz:1: point 0: non-finite"),
+            (b"x,y,z\n", "t.xyz: contains no points"),
             (b"1 2 3\n\n1 nan 3\n", "t.xyz:3: point 1: non-finite"),
             (b"1 2 3\n1 2 -inf\n", "t.xyz:2: point 1: non-finite"),
             (b"# only a comment\n\n", "t.xyz: contains no points"),

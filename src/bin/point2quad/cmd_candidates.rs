@@ -14,7 +14,7 @@ USAGE:
     point2quad candidates INPUT -o CAND.txt [--k K] [--per-point P]
 
 ARGS:
-    INPUT            points: .xyz/.txt (x y z columns), .ply, .obj (v lines), .off
+    INPUT            points: .xyz/.txt/.pts/.csv (x y z columns), .ply, .obj (v lines), .off
 
 OPTIONS:
     -o, --output F   where to write the candidates: one per line, 4 zero-based input

@@ -44,7 +44,8 @@ pub fn run(argv: &[String]) -> Result<()> {
     let out = a.required(cmd, "-o")?;
     // Check every output name before writing anything, so that a bad --gt does not
     // leave a cloud behind (and a .ply cloud is not written as .xyz text).
-    if PointFormat::from_path(Path::new(out))? != PointFormat::Xyz {
+    let csv = Path::new(out).extension().is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+    if csv || PointFormat::from_path(Path::new(out))? != PointFormat::Xyz {
         return Err(Error::Usage(format!(
             "{cmd}: {out}: the cloud is written as text; use .xyz, .txt or .pts (see `point2quad {cmd} --help`)"
         )));

@@ -840,3 +840,39 @@ fn a_csv_cloud_with_a_header_reads_like_its_xyz() {
     assert!(err.contains("c.csv") && err.contains(".xyz, .txt or .pts"), "{err}");
     assert!(!s.path("c.csv").exists());
 }
+
+/// `train --kp-spacing-cells F` sets the point encoder's spacing scale in the saved
+/// config (and reconstruct runs with it); it is refused without a point encoder, for a
+/// non-positive value and with --resume.
+#[test]
+fn train_kp_spacing_cells_reaches_the_model_and_is_checked() {
+    let s = Scratch::new("kpspacing");
+    let meshes = s.p("meshes");
+    write_meshes(&meshes);
+    let data = s.p("data");
+    ok(&["dataset", "--meshes", &meshes, "--out", &data, "--seed", "3"]);
+    let model = s.p("kp.p2qm");
+    let base = ["train", "--data", &data, "--out", &model, "--epochs", "1", "--max-candidates", "200"];
+    let with = |extra: &[&str]| -> Vec<String> { base.iter().chain(extra).map(|x| x.to_string()).collect() };
+    let e = fails(&argv(&with(&["--kp-spacing-cells", "1.5"])), 2);
+    assert!(e.contains("no point encoder"), "{e}");
+    for bad in ["0", "-2", "nan"] {
+        let e = fails(&argv(&with(&["--config", "default_kp", "--kp-spacing-cells", bad])), 2);
+        assert!(e.contains("--kp-spacing-cells"), "{e}");
+    }
+    assert!(!Path::new(&model).exists());
+    ok(&argv(&with(&["--config", "default_kp", "--kp-spacing-cells", "1.5"])));
+    let m = point2quad::pipeline::model::Model::load(Path::new(&model)).unwrap();
+    assert_eq!(m.config().point_encoder.as_ref().map(|k| k.spacing_cells), Some(1.5));
+    let ckpt = format!("{model}.ckpt");
+    let e = fails(&argv(&with(&["--resume", &ckpt, "--kp-spacing-cells", "1.5"])), 2);
+    assert!(e.contains("--resume"), "{e}");
+    let (cloud, out) = (s.p("c.xyz"), s.p("c.obj"));
+    ok(&["synth", "--from", &s.p("meshes/b_torus.obj"), "-o", &cloud, "--seed", "2"]);
+    ok(&["reconstruct", &cloud, "-o", &out, "--model", &model, "--threshold", "0.3"]);
+    assert!(Path::new(&out).is_file());
+}
+
+fn argv(v: &[String]) -> Vec<&str> {
+    v.iter().map(String::as_str).collect()
+}

@@ -303,3 +303,76 @@ fn precomputed_geometries_give_the_same_features() {
     let other = prepare(&kpc::sphere_cloud(150, 0.6, [0.0; 3], 13), &cfg).unwrap();
     assert!(net.forward_with(&mut g, &other, &geoms).is_err());
 }
+
+/// With `spacing_cells` the pyramid does not depend on the cloud's scale: a cloud scaled
+/// by a power of two (exact in floating point) gives the bit-identical pyramid and
+/// features. Without it the same scaling changes the pyramid (so this test can fail).
+#[test]
+fn spacing_cells_make_the_pyramid_independent_of_the_cloud_scale() {
+    let pts = kpc::sphere_cloud(400, 0.6, [0.1, -0.2, 0.05], 7);
+    let scaled = |c: f32| pts.iter().map(|p| [p[0] * c, p[1] * c, p[2] * c]).collect::<Vec<_>>();
+    let spaced = KpfcnnConfig { spacing_cells: 1.5, ..kpc::tiny_config() };
+    let mut ps = ParamStore::new();
+    let net = Kpfcnn::new(&spaced, &mut ps).unwrap();
+    let base = prepare(&pts, &spaced).unwrap();
+    let want = run(&spaced, &mut ps, &net, &base, false);
+    for c in [0.25f32, 8.0, 1024.0] {
+        let pyr = prepare(&scaled(c), &spaced).unwrap();
+        assert_eq!(pyr.points, base.points, "scale {c}: points");
+        assert_eq!(pyr.cells, base.cells, "scale {c}: cells");
+        for l in 0..base.num_levels() {
+            let rows = |p: &PointPyramid| {
+                (0..p.conv[l].n_queries).map(|q| p.conv[l].row(q).to_vec()).collect::<Vec<_>>()
+            };
+            assert_eq!(rows(&pyr), rows(&base), "scale {c}: level {l} neighbourhoods");
+        }
+        assert_eq!(pyr.upsample, base.upsample, "scale {c}: upsampling");
+        let got = run(&spaced, &mut ps, &net, &pyr, false);
+        assert_eq!(got.data(), want.data(), "scale {c}: features");
+    }
+    // Level 0's median spacing is spacing_cells × first_cell after the scaling.
+    let d = point2quad::nn::kpfcnn::median_spacing(&base.points[0]).unwrap();
+    assert!((d / (1.5 * spaced.first_cell) - 1.0).abs() < 1e-5, "median spacing {d}");
+    // The plain config sees a different pyramid at another scale.
+    let plain = kpc::tiny_config();
+    let (a, b) = (prepare(&pts, &plain).unwrap(), prepare(&scaled(8.0), &plain).unwrap());
+    assert_ne!(a.points[1].len(), b.points[1].len(), "the plain pyramid should depend on scale");
+}
+
+/// `median_spacing` equals a brute-force median of each point's nearest distinct
+/// neighbour, on clouds with duplicated points (up to 3 copies) and a lone all-identical cloud.
+#[test]
+fn median_spacing_equals_brute_force() {
+    use point2quad::nn::kpfcnn::median_spacing;
+    for seed in 0..20u64 {
+        let mut rng = point2quad::rng::Rng::new(seed);
+        let n = 2 + (rng.next_u64() % 200) as usize;
+        let mut pts: Vec<[f32; 3]> = (0..n)
+            .map(|_| {
+                [rng.uniform(-1.0, 1.0) as f32, rng.uniform(-1.0, 1.0) as f32, rng.uniform(-0.1, 0.1) as f32]
+            })
+            .collect();
+        for i in 0..n / 4 {
+            let copies = 1 + (rng.next_u64() % 2) as usize;
+            for _ in 0..copies {
+                pts.push(pts[i]);
+            }
+        }
+        let mut nearest: Vec<f32> = pts
+            .iter()
+            .map(|p| {
+                pts.iter()
+                    .map(|q| (0..3).map(|d| (p[d] - q[d]) * (p[d] - q[d])).sum::<f32>())
+                    .filter(|&d2| d2 > 0.0)
+                    .fold(f32::INFINITY, f32::min)
+            })
+            .filter(|d2| d2.is_finite())
+            .collect();
+        nearest.sort_by(f32::total_cmp);
+        let want = nearest[nearest.len() / 2].sqrt();
+        let got = median_spacing(&pts).expect("distinct points");
+        assert!((got - want).abs() <= 1e-6 * want, "seed {seed}: {got} vs brute force {want}");
+    }
+    assert_eq!(median_spacing(&[[1.0, 2.0, 3.0]; 5]), None);
+    assert_eq!(median_spacing(&[[0.0; 3], [f32::NAN, 0.0, 0.0]]), None);
+}

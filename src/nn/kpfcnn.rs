@@ -98,6 +98,12 @@ pub struct KpfcnnConfig {
     pub out_dim: usize,
     /// Seed of weight initialisation and kernel point rotations.
     pub seed: u64,
+    /// When > 0, [`prepare`] scales each cloud so that its median nearest-neighbour
+    /// distance is `spacing_cells · first_cell`: every cloud then looks equally dense to
+    /// the network, whatever its sampling (sum-aggregating KPConvs otherwise give outputs
+    /// that grow with the number of neighbours, and batch norm's running statistics mix
+    /// clouds of very different density). 0 keeps the cloud as given (the presets).
+    pub spacing_cells: f32,
 }
 
 impl Default for KpfcnnConfig {
@@ -124,6 +130,7 @@ impl KpfcnnConfig {
             leaky_slope: 0.1,
             out_dim: 64,
             seed: 0,
+            spacing_cells: 0.0,
         }
     }
 
@@ -187,6 +194,9 @@ impl KpfcnnConfig {
             if !(v.is_finite() && v > 0.0) {
                 return bad(format!("{name} must be finite and > 0, got {v}"));
             }
+        }
+        if !(self.spacing_cells.is_finite() && self.spacing_cells >= 0.0) {
+            return bad(format!("spacing_cells must be finite and ≥ 0, got {}", self.spacing_cells));
         }
         if !(self.bn_momentum.is_finite() && (0.0..=1.0).contains(&self.bn_momentum)) {
             return bad(format!("bn_momentum must be in [0, 1], got {}", self.bn_momentum));
@@ -321,7 +331,8 @@ impl Plan {
 /// Everything geometric the network needs for one cloud, computed once and reusable.
 #[derive(Clone, Debug)]
 pub struct PointPyramid {
-    /// Points per level; level 0 is the input cloud in input order.
+    /// Points per level; level 0 is the input cloud in input order (scaled when
+    /// [`KpfcnnConfig::spacing_cells`] is set).
     pub points: Vec<Vec<[f32; 3]>>,
     /// Cell per level (level 0 nominal).
     pub cells: Vec<f32>,
@@ -334,13 +345,28 @@ pub struct PointPyramid {
 }
 
 /// Builds the pyramid of `points` for `cfg`: grid subsampling, radius neighbourhoods capped per
-/// `cfg.neighbor_cap`, pooling neighbourhoods and upsampling indices.
+/// `cfg.neighbor_cap`, pooling neighbourhoods and upsampling indices. With
+/// `cfg.spacing_cells > 0` the cloud is first scaled about the origin so that its median
+/// nearest-neighbour distance ([`median_spacing`]) is `spacing_cells · first_cell`; a cloud
+/// with no two distinct points is left as it is.
 ///
 /// # Errors
 /// `InvalidInput` for an empty cloud, a non-finite coordinate (named by index) or a bad config.
 pub fn prepare(points: &[[f32; 3]], cfg: &KpfcnnConfig) -> Result<PointPyramid> {
     cfg.validate()?;
     let n_levels = cfg.num_levels();
+    let scaled: Vec<[f32; 3]>;
+    let points = match median_spacing(points).filter(|_| cfg.spacing_cells > 0.0) {
+        Some(d) => {
+            let f = cfg.spacing_cells * cfg.first_cell / d;
+            if !f.is_finite() {
+                return Err(Error::invalid(format!("KPFCNN: cannot scale a cloud of spacing {d} to cells")));
+            }
+            scaled = points.iter().map(|p| [p[0] * f, p[1] * f, p[2] * f]).collect();
+            &scaled[..]
+        }
+        None => points,
+    };
     let sub = subsample_pyramid(points, cfg.first_cell, n_levels)?;
     let trees: Vec<KdTree> = sub.levels.iter().map(|l| KdTree::build(l)).collect();
     let mut conv = Vec::with_capacity(n_levels);
@@ -355,6 +381,26 @@ pub fn prepare(points: &[[f32; 3]], cfg: &KpfcnnConfig) -> Result<PointPyramid> 
         }
     }
     Ok(PointPyramid { points: sub.levels, cells: sub.cells, conv, pool, upsample })
+}
+
+/// The median, over the points that have one, of the distance to the nearest *other*
+/// point at a positive distance (duplicates skipped; among each point's 8 nearest).
+/// `None` for a cloud with no such pair, or when `points` holds a non-finite coordinate.
+pub fn median_spacing(points: &[[f32; 3]]) -> Option<f32> {
+    if points.len() < 2 || points.iter().any(|p| !p.iter().all(|c| c.is_finite())) {
+        return None;
+    }
+    let tree = KdTree::build(points);
+    let table = tree.knn_batch(points, 8);
+    let mut d: Vec<f32> = (0..points.len())
+        .filter_map(|i| table.row(i).1.iter().copied().find(|&d2| d2 > 0.0 && d2.is_finite()))
+        .collect();
+    if d.is_empty() {
+        return None;
+    }
+    let mid = d.len() / 2;
+    let (_, m, _) = d.select_nth_unstable_by(mid, f32::total_cmp);
+    Some(m.sqrt())
 }
 
 impl PointPyramid {

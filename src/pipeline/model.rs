@@ -247,6 +247,10 @@ impl ModelConfig {
                 k.leaky_slope,
                 k.seed
             );
+            // Written only when set, so files without it read as before.
+            if k.spacing_cells > 0.0 {
+                t += &format!("kp_spacing_cells = {}\n", k.spacing_cells);
+            }
         }
         t
     }
@@ -331,6 +335,7 @@ impl ModelConfig {
                             }
                         }
                         "kp_first_cell" => kp.first_cell = num(v)?,
+                        "kp_spacing_cells" => kp.spacing_cells = num(v)?,
                         "kp_conv_radius" => kp.conv_radius = num(v)?,
                         "kp_kp_extent" => kp.kp_extent = num(v)?,
                         "kp_num_kernel_points" => kp.num_kernel_points = int(v)?,
@@ -913,6 +918,7 @@ mod tests {
                 first_cell: 0.1 + 0.2,
                 seed: u64::MAX,
                 out_dim: 5,
+                spacing_cells: 1.0 / 3.0,
                 ..KpfcnnConfig::paper()
             }),
             point_dim: 5,
@@ -962,6 +968,13 @@ mod tests {
         let def = ModelConfig::default_preset().to_text();
         assert!(ModelConfig::from_text(&format!("{def}kp_seed = 1\n"), p).is_err());
         assert!(ModelConfig::from_text(&format!("{kp}kp_seed = 1\n"), p).is_err(), "repeated key");
+        // `kp_spacing_cells` is optional (files before it read as 0) and checked.
+        assert!(!kp.contains("kp_spacing_cells"));
+        let spaced = ModelConfig::from_text(&format!("{kp}kp_spacing_cells = 1.5\n"), p).unwrap();
+        assert_eq!(spaced.point_encoder.as_ref().map(|k| k.spacing_cells), Some(1.5));
+        for bad in ["-1", "inf", "x"] {
+            assert!(ModelConfig::from_text(&format!("{kp}kp_spacing_cells = {bad}\n"), p).is_err(), "{bad}");
+        }
         for (from, to) in [
             ("simple,", "simplex,"),
             ("kp_input = ones", "kp_input = twos"),

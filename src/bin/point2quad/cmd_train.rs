@@ -39,6 +39,10 @@ OPTIONS:
                           orientation seams of the propagated normals do not show
                           (a fresh model only: not with --init or --resume; the
                           shipped weights use it)
+    --kp-spacing-cells F  with a point encoder (default_kp, paper): scale each cloud
+                          so that its median nearest-neighbour distance is F cells
+                          of the encoder's first level, so every cloud looks equally
+                          dense to it (a fresh model only) [off]
     --epochs N            total epochs, 1..100000 (a resumed run continues up to N) [40]
     --resume CKPT         continue exactly from a MODEL.ckpt written earlier
     --init WEIGHTS        start from these weights (any weights file: its config is
@@ -86,6 +90,7 @@ const SPEC: Spec = Spec {
         "--fold",
         "--scale",
         "--jitter",
+        "--kp-spacing-cells",
     ],
     switches: &["--no-rotate", "--no-augment", "--sign-free-normals"],
 };
@@ -281,6 +286,13 @@ pub fn run(argv: &[String]) -> Result<()> {
         return Err(Error::Usage(format!("train: --lr must be a finite number > 0, got {}", cfg.sgd.lr)));
     }
     augmentation(&a, &mut cfg)?;
+    let fresh_only = a.value("--init").is_some() || a.value("--resume").is_some();
+    if a.value("--kp-spacing-cells").is_some() && fresh_only {
+        return Err(Error::Usage(
+            "train: --kp-spacing-cells cannot be combined with --init or --resume (the weights file holds its config)"
+                .into(),
+        ));
+    }
     if a.switch("--sign-free-normals") && (a.value("--init").is_some() || a.value("--resume").is_some()) {
         return Err(Error::Usage(
             "train: --sign-free-normals cannot be combined with --init or --resume (the weights file holds its config)"
@@ -323,6 +335,21 @@ pub fn run(argv: &[String]) -> Result<()> {
             None => {
                 let mut config = ModelConfig::preset(a.value("--config").unwrap_or("default"))?;
                 config.sign_free_normals = a.switch("--sign-free-normals");
+                if let Some(v) = a.value("--kp-spacing-cells") {
+                    let f: f32 = a.parsed(cmd, "--kp-spacing-cells", 0.0f32)?;
+                    let Some(kp) = config.point_encoder.as_mut() else {
+                        return Err(Error::Usage(format!(
+                            "train: --kp-spacing-cells {v}: the {} preset has no point encoder (use default_kp or paper)",
+                            config.preset
+                        )));
+                    };
+                    if !(f.is_finite() && f > 0.0) {
+                        return Err(Error::Usage(format!(
+                            "train: --kp-spacing-cells must be a finite number > 0, got {v}"
+                        )));
+                    }
+                    kp.spacing_cells = f;
+                }
                 (Model::new(config, cfg.seed)?, None)
             }
         },

@@ -70,12 +70,18 @@ fn write_meshes(dir: &str) {
     }
 }
 
-/// A weights file (1 epoch on three small meshes) and the data folder, in `s`.
-fn trained(s: &Scratch) -> String {
+/// `s/data`: the dataset of the three meshes of [`write_meshes`] (seed 3).
+fn three_mesh_data(s: &Scratch) -> String {
     let meshes = s.p("meshes");
     write_meshes(&meshes);
     let data = s.p("data");
     ok(&["dataset", "--meshes", &meshes, "--out", &data, "--seed", "3"]);
+    data
+}
+
+/// A weights file (1 epoch on three small meshes) and the data folder, in `s`.
+fn trained(s: &Scratch) -> String {
+    let data = three_mesh_data(s);
     let model = s.p("m.p2qm");
     let out = ok(&[
         "train",
@@ -847,10 +853,7 @@ fn a_csv_cloud_with_a_header_reads_like_its_xyz() {
 #[test]
 fn train_kp_spacing_cells_reaches_the_model_and_is_checked() {
     let s = Scratch::new("kpspacing");
-    let meshes = s.p("meshes");
-    write_meshes(&meshes);
-    let data = s.p("data");
-    ok(&["dataset", "--meshes", &meshes, "--out", &data, "--seed", "3"]);
+    let data = three_mesh_data(&s);
     let model = s.p("kp.p2qm");
     let base = ["train", "--data", &data, "--out", &model, "--epochs", "1", "--max-candidates", "200"];
     let with = |extra: &[&str]| -> Vec<String> { base.iter().chain(extra).map(|x| x.to_string()).collect() };

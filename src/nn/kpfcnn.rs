@@ -356,7 +356,8 @@ pub fn prepare(points: &[[f32; 3]], cfg: &KpfcnnConfig) -> Result<PointPyramid> 
     cfg.validate()?;
     let n_levels = cfg.num_levels();
     let scaled: Vec<[f32; 3]>;
-    let points = match median_spacing(points).filter(|_| cfg.spacing_cells > 0.0) {
+    let spacing = if cfg.spacing_cells > 0.0 { median_spacing(points) } else { None };
+    let points = match spacing {
         Some(d) => {
             let f = cfg.spacing_cells * cfg.first_cell / d;
             if !f.is_finite() {

@@ -17,9 +17,10 @@ USAGE:
     point2quad reconstruct INPUT -o OUT.{obj,ply,off} [OPTIONS]
 
 INPUT is a point cloud (.xyz/.txt/.pts/.csv, .ply, .obj or .off; only positions are
-read; a first line of column names such as x,y,z is skipped), at any scale, pose or offset. The output mesh's vertices are the input points,
-written back exactly and in input order (points no face uses stay as isolated
-vertices), then any vertices hole filling added.
+read; a first line of column names such as x,y,z is skipped), at any scale, pose or
+offset. The output mesh's vertices are the input points, written back exactly and in
+input order (points no face uses stay as isolated vertices), then any vertices hole
+filling added.
 
 OPTIONS:
     -o, --output OUT      output mesh; format from the extension (required)

@@ -870,6 +870,11 @@ fn train_kp_spacing_cells_reaches_the_model_and_is_checked() {
     let ckpt = format!("{model}.ckpt");
     let e = fails(&argv(&with(&["--resume", &ckpt, "--kp-spacing-cells", "1.5"])), 2);
     assert!(e.contains("--resume"), "{e}");
+    // The same guard covers --sign-free-normals.
+    for from_file in [["--resume", ckpt.as_str()], ["--init", model.as_str()]] {
+        let e = fails(&argv(&with(&[from_file[0], from_file[1], "--sign-free-normals"])), 2);
+        assert!(e.contains("--sign-free-normals cannot be combined"), "{e}");
+    }
     let (cloud, out) = (s.p("c.xyz"), s.p("c.obj"));
     ok(&["synth", "--from", &s.p("meshes/b_torus.obj"), "-o", &cloud, "--seed", "2"]);
     ok(&["reconstruct", &cloud, "-o", &out, "--model", &model, "--threshold", "0.3"]);

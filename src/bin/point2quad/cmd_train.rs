@@ -286,14 +286,15 @@ pub fn run(argv: &[String]) -> Result<()> {
         return Err(Error::Usage(format!("train: --lr must be a finite number > 0, got {}", cfg.sgd.lr)));
     }
     augmentation(&a, &mut cfg)?;
-    let fresh_only = a.value("--init").is_some() || a.value("--resume").is_some();
-    if a.value("--kp-spacing-cells").is_some() && fresh_only {
+    // These options shape a fresh model's config; --init and --resume read theirs from a file.
+    let from_file = a.value("--init").is_some() || a.value("--resume").is_some();
+    if a.value("--kp-spacing-cells").is_some() && from_file {
         return Err(Error::Usage(
             "train: --kp-spacing-cells cannot be combined with --init or --resume (the weights file holds its config)"
                 .into(),
         ));
     }
-    if a.switch("--sign-free-normals") && (a.value("--init").is_some() || a.value("--resume").is_some()) {
+    if a.switch("--sign-free-normals") && from_file {
         return Err(Error::Usage(
             "train: --sign-free-normals cannot be combined with --init or --resume (the weights file holds its config)"
                 .into(),

@@ -699,6 +699,108 @@ fn main() {
         Some("normals") => normals_check(),
         Some("seams") => seams(),
         Some("agreement") => agreement(),
+        Some("grow") => grow(),
         _ => eprintln!("usage: coverage_diagnostics ceilings|mesh|sweep|losses (see the file header)"),
+    }
+}
+
+/// `grow`: lattice continuation. From seed candidates, the quad across each side a → b
+/// of a seed (a, b, c, d) is predicted by parallelogram: a' = a + (a − d), b' = b + (b − c),
+/// each snapped to its nearest point when within GT × the side length; repeated GI
+/// times from the new quads. Seeds: GS=all (every candidate), gt (only true faces: the
+/// ceiling of continuing from accepted faces), rank (candidates of rank < GR).
+fn grow() {
+    use point2quad::spatial::kdtree::KdTree;
+    let files = mesh_files("train").unwrap();
+    let cfg = CandidateConfig::default();
+    let env = |k: &str, d: f32| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d);
+    let tol = env("GT", 0.3);
+    let iters = env("GI", 3.0) as usize;
+    let rank_lim = env("GR", 4.0) as u16;
+    let seeds = std::env::var("GS").unwrap_or_else(|_| "all".into());
+    let dm = std::env::var("DM").ok();
+    for noisy in [false, true] {
+        let (mut faces, mut before, mut after, mut pts_n, mut cands, mut added) =
+            (0usize, 0usize, 0usize, 0usize, 0usize, 0usize);
+        for path in &files {
+            let name = path.file_stem().unwrap().to_string_lossy().to_string();
+            if dm.as_ref().is_some_and(|d| !name.contains(d.as_str())) {
+                continue;
+            }
+            let mesh = load_quad_mesh(path);
+            let pts = if noisy { noisy_cloud(&mesh, 1) } else { mesh.vertices.clone() };
+            let (cov, c) = coverage(&pts, &mesh.quads, &cfg);
+            let frame = point2quad::pipeline::frame::Frame::fit(&pts).unwrap();
+            let local = frame.to_local_all(&pts);
+            let tree = KdTree::build(&local);
+            let gt: HashSet<[u32; 4]> = mesh.quads.iter().map(key).collect();
+            let mut have: HashSet<[u32; 4]> = c.quads.iter().map(key).collect();
+            let mut frontier: Vec<[u32; 4]> = c
+                .quads
+                .iter()
+                .zip(&c.rank)
+                .filter(|(q, r)| match seeds.as_str() {
+                    "gt" => gt.contains(&key(q)),
+                    "rank" => **r < rank_lim,
+                    _ => true,
+                })
+                .map(|(q, _)| *q)
+                .collect();
+            let mut n_added = 0usize;
+            for _ in 0..iters {
+                let mut next = Vec::new();
+                for q in &frontier {
+                    for e in 0..4 {
+                        let (a, b, cc, d) = (q[e], q[(e + 1) % 4], q[(e + 2) % 4], q[(e + 3) % 4]);
+                        let (pa, pb, pc, pd) =
+                            (local[a as usize], local[b as usize], local[cc as usize], local[d as usize]);
+                        let la = [2.0 * pa[0] - pd[0], 2.0 * pa[1] - pd[1], 2.0 * pa[2] - pd[2]];
+                        let lb = [2.0 * pb[0] - pc[0], 2.0 * pb[1] - pc[1], 2.0 * pb[2] - pc[2]];
+                        let (Some(na), Some(nb)) = (tree.nearest(la), tree.nearest(lb)) else { continue };
+                        let sa = point2quad::spatial::kdtree::dist_sq(pa, pd).sqrt();
+                        let sb = point2quad::spatial::kdtree::dist_sq(pb, pc).sqrt();
+                        if na.dist_sq.sqrt() > tol * sa || nb.dist_sq.sqrt() > tol * sb {
+                            continue;
+                        }
+                        let nq = [b, a, na.index, nb.index];
+                        if (0..4).any(|i| (i + 1..4).any(|j| nq[i] == nq[j])) {
+                            continue;
+                        }
+                        if have.insert(key(&nq)) {
+                            n_added += 1;
+                            if seeds != "gt" || gt.contains(&key(&nq)) {
+                                next.push(nq);
+                            }
+                        }
+                    }
+                }
+                frontier = next;
+            }
+            let cov_after = mesh.quads.iter().filter(|f| have.contains(&key(f))).count();
+            println!(
+                "{:28} {} faces {:6} cov {:.4} -> {:.4}  cand/pt {:.2} + {:.2}",
+                name,
+                if noisy { "N" } else { "C" },
+                mesh.quads.len(),
+                cov.ratio(),
+                cov_after as f64 / mesh.quads.len() as f64,
+                cov.per_point(),
+                n_added as f64 / pts.len() as f64
+            );
+            faces += mesh.quads.len();
+            before += cov.covered;
+            after += cov_after;
+            pts_n += pts.len();
+            cands += cov.candidates;
+            added += n_added;
+        }
+        println!(
+            "TOTAL {} cov {:.4} -> {:.4}  cand/pt {:.2} + {:.2}",
+            if noisy { "N" } else { "C" },
+            before as f64 / faces as f64,
+            after as f64 / faces as f64,
+            cands as f64 / pts_n as f64,
+            added as f64 / pts_n as f64
+        );
     }
 }

@@ -232,3 +232,212 @@ fn dataset_skips_unusable_meshes_and_refuses_an_empty_result() {
     assert!(err.contains("warning: skipping") && err.contains("pts.ply: no faces"), "{err}");
     assert!(dir.path("ds/grid.p2qs").is_file() && dir.path("ds/index.txt").is_file());
 }
+
+// ---- Session 16's audit ----------------------------------------------------------
+
+/// Regression: when the second output (`--svg`, `--gt`) failed, the first was deleted
+/// after it had replaced its target, so a failed preview cost the old content of `-o`
+/// (with `-o` naming the input, the input itself). Now every output is written in full
+/// before any target is replaced. `/proc` exists as a folder, so the early output
+/// check passes, and no file can be created in it.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_failed_second_output_leaves_the_first_target_as_it_was() {
+    let dir = Scratch::new("audit16_stage");
+    let cloud = dir.write("c.xyz", &xyz(&cube_cloud(1.0)));
+    let out = dir.write("out.obj", b"PREVIOUS");
+    let args = ["reconstruct", &cloud, "-o", &out, "--svg", "/proc/p2q_test_preview.svg"];
+    assert_fails(&p2q(&args), 1, &["/proc/p2q_test_preview.svg"], "reconstruct --svg into /proc");
+    assert_eq!(std::fs::read(&out).expect("test: out.obj still there"), b"PREVIOUS");
+    let gt_cloud = dir.write("s.xyz", b"PREVIOUS");
+    let args = ["synth", "-o", &gt_cloud, "--gt", "/proc/p2q_test_gt.obj"];
+    assert_fails(&p2q(&args), 1, &["/proc/p2q_test_gt.obj"], "synth --gt into /proc");
+    assert_eq!(std::fs::read(&gt_cloud).expect("test: s.xyz still there"), b"PREVIOUS");
+    // No temporary file is left behind either.
+    let names = dir.entries();
+    assert_eq!(names.len(), 3, "{names:?}");
+    // And with both writable, both are written.
+    let svg = dir.p("p.svg");
+    assert_ok(&p2q(&["reconstruct", &cloud, "-o", &out, "--svg", &svg]), "reconstruct with --svg");
+    assert!(faces(&out).len() > 100);
+    assert!(std::fs::read_to_string(&svg).expect("test: svg").contains("<svg"));
+}
+
+/// An output that is the input file, under its own name or another, is refused before
+/// the work: `reconstruct m.obj -o m.obj` replaced the input mesh with the result and
+/// `candidates c.xyz -o c.xyz` the cloud with index lines.
+#[test]
+fn an_output_that_is_the_input_file_is_refused() {
+    let dir = Scratch::new("audit16_same");
+    let pts = cube_cloud(1.0);
+    let obj_cloud: String = pts.iter().map(|p| format!("v {:?} {:?} {:?}\n", p[0], p[1], p[2])).collect();
+    let cloud_obj = dir.write("cloud.obj", obj_cloud.as_bytes());
+    let cloud = dir.write("c.xyz", &xyz(&pts));
+    let mesh = dir.write("q.obj", b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n");
+    // The same file under another name: `dir/./q.obj`.
+    let mesh_alias = format!("{}/./q.obj", dir.0.display());
+    let cases: Vec<Vec<&str>> = vec![
+        vec!["reconstruct", &cloud_obj, "-o", &cloud_obj],
+        vec!["candidates", &cloud, "-o", &cloud],
+        vec!["repair", &mesh, "-o", &mesh_alias],
+        vec!["synth", "--from", &mesh, "-o", &cloud, "--gt", &mesh],
+    ];
+    let before: Vec<Vec<u8>> =
+        [&cloud_obj, &cloud, &mesh].iter().map(|p| std::fs::read(p).expect("test: read")).collect();
+    for args in &cases {
+        assert_fails(&p2q(args), 2, &["is the input file"], &format!("{args:?}"));
+    }
+    let after: Vec<Vec<u8>> =
+        [&cloud_obj, &cloud, &mesh].iter().map(|p| std::fs::read(p).expect("test: read")).collect();
+    assert_eq!(before, after, "an input was changed");
+}
+
+/// A copy of the cloud moved by far less than its spacing (a float32 round trip, two
+/// exports of one scan) used to fill every neighbourhood with near-copies: a 40 × 40
+/// grid plus its copy shifted by 1e-6 gave 1 face instead of 1,521. Near-duplicates
+/// now count once and the faces are the grid's own. `--merge-share 0` turns it off,
+/// which must bring the collapse back (so the test can fail).
+#[test]
+fn near_duplicate_copies_give_the_faces_of_the_cloud() {
+    let dir = Scratch::new("audit16_near");
+    let grid: Vec<[f64; 3]> =
+        (0..1600).map(|i| [(i % 40) as f64 * 0.1, (i / 40) as f64 * 0.1, 0.0]).collect();
+    let clean = dir.write("g.xyz", &xyz(&grid));
+    let out = dir.p("g.obj");
+    assert_ok(&p2q(&["reconstruct", &clean, "-o", &out]), "grid");
+    let want = faces(&out);
+    assert!(want.len() > 1400, "{}", want.len());
+    for shift in [1e-12, 1e-7, 5e-5] {
+        let mut both = grid.clone();
+        both.extend(grid.iter().map(|p| [p[0] + shift, p[1], p[2]]));
+        let cloud = dir.write("gg.xyz", &xyz(&both));
+        let err = assert_ok(&p2q(&["reconstruct", &cloud, "-o", &out]), "grid + shifted copy");
+        assert_eq!(faces(&out), want, "shift {shift}");
+        assert!(err.contains("1600 duplicate or near-duplicate point(s)"), "{err}");
+        // The copies stay in the output, as isolated vertices after the originals.
+        let text = std::fs::read_to_string(&out).expect("test: read");
+        assert_eq!(text.lines().filter(|l| l.starts_with("v ")).count(), 3200);
+        if shift == 1e-7 {
+            assert_ok(&p2q(&["reconstruct", &cloud, "-o", &out, "--merge-share", "0"]), "merging off");
+            assert!(faces(&out).len() < want.len() / 2, "without merging: {} faces", faces(&out).len());
+        }
+    }
+}
+
+/// One stray point 1e10 away squeezed the rest of the cloud below f32 resolution in the
+/// normalised frame: no face at all, and a warning that blamed the surface. Far
+/// outliers are now left out, named in a warning, and the faces are the grid's.
+#[test]
+fn a_far_outlier_is_left_out_and_named() {
+    let dir = Scratch::new("audit16_far");
+    let grid: Vec<[f64; 3]> = (0..900).map(|i| [(i % 30) as f64, (i / 30) as f64, 0.0]).collect();
+    let clean = dir.write("g.xyz", &xyz(&grid));
+    let out = dir.p("g.obj");
+    assert_ok(&p2q(&["reconstruct", &clean, "-o", &out]), "grid");
+    let want = faces(&out);
+    assert!(want.len() > 800, "{}", want.len());
+    for far in [1e10, 1e30, -1e200] {
+        let mut pts = grid.clone();
+        pts.insert(17, [far, 3.0, 0.5]);
+        let cloud = dir.write("o.xyz", &xyz(&pts));
+        let err = assert_ok(&p2q(&["reconstruct", &cloud, "-o", &out]), "grid + outlier");
+        assert!(err.contains("1 far outlier(s) left out") && err.contains("point 17 "), "{err}");
+        // Indices past the outlier shift by one in the output.
+        let shifted: Vec<String> = want
+            .iter()
+            .map(|l| {
+                let ids: Vec<String> = l[2..]
+                    .split_whitespace()
+                    .map(|t| {
+                        let v: usize = t.parse().expect("test: plain OBJ index");
+                        (if v > 17 { v + 1 } else { v }).to_string()
+                    })
+                    .collect();
+                format!("f {}", ids.join(" "))
+            })
+            .collect();
+        assert_eq!(faces(&out), shifted, "outlier at {far}");
+    }
+}
+
+/// Inputs that are not regular files: `/dev/zero` as weights was read until the machine
+/// ran out of memory (22 GB); a cloud behind a link to it would have been too.
+#[cfg(target_os = "linux")]
+#[test]
+fn device_files_are_refused_as_inputs() {
+    let dir = Scratch::new("audit16_dev");
+    let cloud = dir.write("c.xyz", &xyz(&cube_cloud(1.0)));
+    let out = dir.p("o.obj");
+    let args = ["reconstruct", &cloud, "-o", &out, "--model", "/dev/zero"];
+    assert_fails(&p2q(&args), 1, &["/dev/zero", "not a regular file"], "--model /dev/zero");
+    let link = dir.p("z.xyz");
+    std::os::unix::fs::symlink("/dev/zero", &link).expect("test: symlink");
+    assert_fails(&p2q(&["reconstruct", &link, "-o", &out]), 1, &["z.xyz", "not a regular file"], "cloud");
+    assert!(!std::path::Path::new(&out).exists());
+}
+
+/// NaN passed `parsed_in`'s range check (`v < lo || v > hi` is false for NaN), so
+/// `--rescue-min-prob nan` silently turned the rescue off.
+#[test]
+fn nan_is_refused_by_ranged_options() {
+    let dir = Scratch::new("audit16_nan");
+    let cloud = dir.write("c.xyz", &xyz(&cube_cloud(1.0)));
+    let out = dir.p("o.obj");
+    for (opt, v) in [("--rescue-min-prob", "nan"), ("--merge-share", "NaN"), ("--merge-share", "0.6")] {
+        assert_fails(&p2q(&["reconstruct", &cloud, "-o", &out, opt, v]), 2, &[opt], &format!("{opt} {v}"));
+    }
+    assert!(!std::path::Path::new(&out).exists());
+}
+
+/// An OFF read as a point cloud stopped after the vertices its header declared, so a
+/// wrong count went unnoticed: one too many read the face line `4 0 1 2 3` as a vertex,
+/// one too few dropped vertices. The face section is now checked too, and the error
+/// names the header.
+#[test]
+fn an_off_cloud_whose_header_count_is_wrong_is_refused() {
+    let dir = Scratch::new("audit16_off");
+    let out = dir.p("o.obj");
+    let square = "0 0 0\n1 0 0\n1 1 0\n0 1 0\n";
+    let over = dir.write("over.off", format!("OFF\n5 1 0\n{square}4 0 1 2 3\n").as_bytes());
+    let under =
+        dir.write("under.off", format!("OFF\n4 0 0\n{square}0 0 1\n1 0 1\n1 1 1\n0 1 1\n").as_bytes());
+    for (f, at) in [(&over, "over.off"), (&under, "under.off:7")] {
+        for cmd in ["reconstruct", "candidates"] {
+            let o = if cmd == "candidates" { dir.p("o.txt") } else { out.clone() };
+            assert_fails(&p2q(&[cmd, f, "-o", &o]), 1, &[at, "line 2 declares"], &format!("{cmd} {f}"));
+        }
+    }
+    // A correct header still reads.
+    let good = dir
+        .write("good.off", format!("OFF\n8 1 0\n{square}0 0 1\n1 0 1\n1 1 1\n0 1 1\n4 0 1 2 3\n").as_bytes());
+    assert_ok(&p2q(&["candidates", &good, "-o", &dir.p("o.txt")]), "good OFF");
+}
+
+/// `dataset --meshes` aborted the whole run on a mesh whose faces all have zero area
+/// (no noise point can be placed), naming the sample instead of the file; it is now
+/// skipped with a warning naming the file. And a folder that already holds samples is
+/// refused: `train` reads every sample in it, so old ones joined the new set.
+#[test]
+fn dataset_skips_zero_area_meshes_and_refuses_a_folder_with_samples() {
+    let dir = Scratch::new("audit16_ds");
+    let meshes = dir.path("meshes");
+    std::fs::create_dir(&meshes).expect("test: mkdir");
+    let flat: String = (0..8).map(|i| format!("v {i} 0 0\n")).collect::<String>() + "f 1 2 3 4\nf 5 6 7 8\n";
+    std::fs::write(meshes.join("flat.obj"), flat).expect("test: write");
+    let grid: String = (0..16).map(|i| format!("v {} {} 0\n", i % 4, i / 4)).collect::<String>()
+        + &(0..9)
+            .map(|c| {
+                let v = (c / 3) * 4 + c % 3 + 1;
+                format!("f {} {} {} {}\n", v, v + 1, v + 5, v + 4)
+            })
+            .collect::<String>();
+    std::fs::write(meshes.join("grid.obj"), grid).expect("test: write");
+    let out = dir.p("data");
+    let m = meshes.display().to_string();
+    let err = assert_ok(&p2q(&["dataset", "--out", &out, "--meshes", &m]), "dataset");
+    assert!(err.contains("skipping") && err.contains("flat.obj") && err.contains("area"), "{err}");
+    assert!(dir.path("data/grid.p2qs").exists() && !dir.path("data/flat.p2qs").exists());
+    let again = p2q(&["dataset", "--out", &out, "--synthetic", "1"]);
+    assert_fails(&again, 2, &["already holds 1 sample"], "dataset into a folder with samples");
+    assert!(!dir.path("data/synthetic_0000.p2qs").exists() && dir.path("data/grid.p2qs").exists());
+}

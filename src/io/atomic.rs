@@ -21,14 +21,73 @@ static COUNTER: AtomicU64 = AtomicU64::new(0);
 /// of whatever `f` made of it); any other error `f` returns is passed on. On every
 /// error the temporary file is removed and `path` is left as it was.
 pub fn write_atomic(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
-    let (tmp, file) = create_temp(path)?;
-    let result =
-        write_and_sync(path, file, f).and_then(|()| fs::rename(&tmp, path).map_err(|e| Error::io(path, e)));
-    if result.is_err() {
-        // Best effort: the original error matters more than a failed clean-up.
-        let _ = fs::remove_file(&tmp);
+    prepare_atomic(path, f)?.commit()
+}
+
+/// A fully written, synced temporary file waiting to be renamed over its target by
+/// [`Staged::commit`]. Dropped without a commit (an error in a later step), it removes
+/// the temporary file and the target stays as it was.
+#[derive(Debug)]
+pub struct Staged {
+    tmp: Option<PathBuf>,
+    path: PathBuf,
+}
+
+impl Staged {
+    /// The target path.
+    pub fn path(&self) -> &Path {
+        &self.path
     }
-    result
+
+    /// Renames the temporary file over the target.
+    ///
+    /// # Errors
+    /// `Io` naming the target when the rename fails (the temporary file is removed).
+    pub fn commit(mut self) -> Result<()> {
+        let Some(tmp) = self.tmp.take() else { return Ok(()) };
+        fs::rename(&tmp, &self.path).map_err(|e| {
+            let _ = fs::remove_file(&tmp);
+            Error::io(&self.path, e)
+        })
+    }
+}
+
+impl Drop for Staged {
+    fn drop(&mut self) {
+        if let Some(tmp) = self.tmp.take() {
+            // Best effort, as in `write_atomic`.
+            let _ = fs::remove_file(tmp);
+        }
+    }
+}
+
+/// The first half of [`write_atomic`]: writes and syncs the temporary file but does not
+/// rename it. A command with several outputs stages them all and commits only when
+/// every one was written, so a failure on the last leaves every earlier target as it
+/// was (a failed `--svg` preview must not cost the mesh written before it, or, with
+/// `-o` naming an existing file, that file's old content).
+///
+/// # Errors
+/// As [`write_atomic`]; on error nothing is left behind.
+pub fn prepare_atomic(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<Staged> {
+    let (tmp, file) = create_temp(path)?;
+    match write_and_sync(path, file, f) {
+        Ok(()) => Ok(Staged { tmp: Some(tmp), path: path.to_path_buf() }),
+        Err(e) => {
+            // Best effort: the original error matters more than a failed clean-up.
+            let _ = fs::remove_file(&tmp);
+            Err(e)
+        }
+    }
+}
+
+/// Commits staged writes in order (see [`prepare_atomic`]).
+///
+/// # Errors
+/// The first failed rename's error; the files after it are not committed (their
+/// temporary files are removed).
+pub fn commit_all(staged: Vec<Staged>) -> Result<()> {
+    staged.into_iter().try_for_each(Staged::commit)
 }
 
 /// Creates a new temporary file next to `path`. `create_new` makes the name
@@ -126,6 +185,29 @@ impl<W: Write> Write for Tracking<W> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Staged writes replace nothing until committed: dropped, they leave the targets
+    /// as they were and no temporary file; committed, every target has its content.
+    #[test]
+    fn staged_writes_replace_targets_only_when_committed() {
+        let d = scratch_dir("staged");
+        let (a, b) = (d.join("a.txt"), d.join("b.txt"));
+        fs::write(&a, b"old a").unwrap();
+        let sa = prepare_atomic(&a, |w| w.write_all(b"new a").map_err(|e| Error::io("a", e))).unwrap();
+        let sb = prepare_atomic(&b, |w| w.write_all(b"new b").map_err(|e| Error::io("b", e))).unwrap();
+        assert_eq!(fs::read(&a).unwrap(), b"old a");
+        assert!(!b.exists());
+        drop((sa, sb));
+        assert_eq!(fs::read(&a).unwrap(), b"old a");
+        assert_eq!(fs::read_dir(&d).unwrap().count(), 1, "temporary files left behind");
+        let sa = prepare_atomic(&a, |w| w.write_all(b"new a").map_err(|e| Error::io("a", e))).unwrap();
+        let sb = prepare_atomic(&b, |w| w.write_all(b"new b").map_err(|e| Error::io("b", e))).unwrap();
+        assert_eq!(sb.path(), b.as_path());
+        commit_all(vec![sa, sb]).unwrap();
+        assert_eq!((fs::read(&a).unwrap(), fs::read(&b).unwrap()), (b"new a".to_vec(), b"new b".to_vec()));
+        assert_eq!(fs::read_dir(&d).unwrap().count(), 2);
+        let _ = fs::remove_dir_all(&d);
+    }
 
     fn scratch_dir(tag: &str) -> PathBuf {
         let d = std::env::temp_dir().join(format!(

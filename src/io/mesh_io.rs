@@ -2,7 +2,7 @@
 //! entry points the pipeline and the CLI use. The format modules do the work on
 //! bytes; this file picks one, touches the file system, and writes atomically.
 
-use super::atomic::write_atomic;
+use super::atomic::{prepare_atomic, Staged};
 pub use super::ply::PlyEncoding;
 use super::{obj, off, ply, text};
 use crate::error::{Error, Result};
@@ -54,7 +54,7 @@ pub struct WriteOptions {
 /// errors of [`parse_mesh`].
 pub fn read_mesh(path: &Path) -> Result<PolyMesh> {
     let format = MeshFormat::from_path(path)?;
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::io::read_input_file(path)?;
     parse_mesh(&bytes, format, &path.display().to_string())
 }
 
@@ -83,7 +83,7 @@ pub fn parse_mesh(bytes: &[u8], format: MeshFormat, name: &str) -> Result<PolyMe
 /// As [`read_mesh`], less the "no vertices" error.
 pub fn read_mesh_allow_empty(path: &Path) -> Result<PolyMesh> {
     let format = MeshFormat::from_path(path)?;
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::io::read_input_file(path)?;
     parse_mesh_allow_empty(&bytes, format, &path.display().to_string())
 }
 
@@ -137,7 +137,7 @@ pub fn write_mesh(path: &Path, mesh: &PolyMesh) -> Result<()> {
     write_mesh_with(path, mesh, &WriteOptions::default())
 }
 
-/// Writes a mesh atomically (see [`write_atomic`]), choosing the format by
+/// Writes a mesh atomically (see [`crate::io::atomic::write_atomic`]), choosing the format by
 /// extension. Coordinates read back bit-exactly in every format.
 ///
 /// # Errors
@@ -145,9 +145,18 @@ pub fn write_mesh(path: &Path, mesh: &PolyMesh) -> Result<()> {
 /// read back (non-finite coordinate, a face with fewer than 3 vertices or an index
 /// out of range), in which case nothing is written; `Io` naming the path.
 pub fn write_mesh_with(path: &Path, mesh: &PolyMesh, options: &WriteOptions) -> Result<()> {
+    prepare_mesh_with(path, mesh, options)?.commit()
+}
+
+/// [`write_mesh_with`] up to the rename: the mesh is in a synced temporary file that
+/// [`Staged::commit`] renames over `path` (see [`crate::io::atomic::prepare_atomic`]).
+///
+/// # Errors
+/// As [`write_mesh_with`].
+pub fn prepare_mesh_with(path: &Path, mesh: &PolyMesh, options: &WriteOptions) -> Result<Staged> {
     let format = MeshFormat::from_path(path)?;
     check_writable(mesh)?;
-    write_atomic(path, |w| match format {
+    prepare_atomic(path, |w| match format {
         MeshFormat::Obj => obj::write_obj(w, mesh),
         MeshFormat::Off => off::write_off(w, mesh),
         MeshFormat::Ply => ply::write_ply(w, mesh, options.ply_encoding),

@@ -90,10 +90,7 @@ pub(crate) fn parse_off_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
         return Err(Error::parse(name, cl, format!("{nv} vertices is more than this reader supports")));
     }
     // Capacity from the data actually present, not from a count that may lie.
-    let mut mesh = PolyMesh {
-        vertices: Vec::with_capacity(nv.min(bytes.len() / 6)),
-        faces: Vec::with_capacity(if want_faces { nf.min(bytes.len() / 8) } else { 0 }),
-    };
+    let mut mesh = PolyMesh { vertices: Vec::with_capacity(nv.min(bytes.len() / 6)), faces: Vec::new() };
     for i in 0..nv {
         let (ln, line) = lines.next().ok_or_else(|| {
             Error::parse(name, 0, format!("truncated: file ends at vertex {i} of {nv} declared"))
@@ -108,9 +105,35 @@ pub(crate) fn parse_off_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
         }
         mesh.vertices.push(p);
     }
-    if !want_faces {
-        return Ok(mesh);
-    }
+    // The faces are read (and checked) even for a point cloud: a header whose vertex
+    // count is wrong shows only there, as a face line read as a vertex or a vertex
+    // line read as a face. Every error from here on also names the header.
+    let hint = |e: Error| match e {
+        Error::Parse { path, line, msg } => Error::Parse {
+            path,
+            line,
+            msg: format!(
+                "{msg} (the header on line {cl} declares {nv} vertices and {nf} faces; is a count wrong?)"
+            ),
+        },
+        other => other,
+    };
+    let faces = parse_faces(&mut lines, name, nv, nf, want_faces, bytes.len()).map_err(hint)?;
+    mesh.faces = faces;
+    Ok(mesh)
+}
+
+/// The face section of an OFF file after its `nv` vertices: `nf` faces, then nothing.
+/// Faces are kept only with `keep`.
+fn parse_faces<'a>(
+    lines: &mut impl Iterator<Item = (usize, &'a [u8])>,
+    name: &str,
+    nv: usize,
+    nf: usize,
+    keep: bool,
+    n_bytes: usize,
+) -> Result<Vec<Vec<u32>>> {
+    let mut faces: Vec<Vec<u32>> = Vec::with_capacity(if keep { nf.min(n_bytes / 8) } else { 0 });
     for i in 0..nf {
         let (ln, line) = lines.next().ok_or_else(|| {
             Error::parse(name, 0, format!("truncated: file ends at face {i} of {nf} declared"))
@@ -147,16 +170,14 @@ pub(crate) fn parse_off_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
             }
         }
         // Anything after the indices is a colour; ignored.
-        mesh.faces.push(face);
+        if keep {
+            faces.push(face);
+        }
     }
     if let Some((ln, _)) = lines.next() {
-        return Err(Error::parse(
-            name,
-            ln,
-            format!("data after the last face (the header declares {nv} vertices and {nf} faces)"),
-        ));
+        return Err(Error::parse(name, ln, "data after the last face"));
     }
-    Ok(mesh)
+    Ok(faces)
 }
 
 /// The next token on the current line, else the first of the next data line.

@@ -1,7 +1,7 @@
 //! Point clouds: read from .xyz/.txt/.pts/.csv (text columns), .ply, .obj and .off
 //! (their vertices), write as .xyz with round-trip-exact coordinates.
 
-use super::atomic::write_atomic;
+use super::atomic::{prepare_atomic, Staged};
 use super::text::{self, coord, out_err, parse_i64, show, Lines, Tokens};
 use super::{obj, off, ply};
 use crate::error::{Error, Result};
@@ -49,7 +49,7 @@ impl PointFormat {
 /// errors of [`parse_points`].
 pub fn read_points(path: &Path) -> Result<Vec<[f64; 3]>> {
     let format = PointFormat::from_path(path)?;
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::io::read_input_file(path)?;
     parse_points(&bytes, format, &path.display().to_string())
 }
 
@@ -160,10 +160,18 @@ fn is_column_header(line: &[u8]) -> bool {
 /// `InvalidInput` naming the first non-finite point (nothing is written); `Io`
 /// naming the path.
 pub fn write_points_xyz(path: &Path, points: &[[f64; 3]]) -> Result<()> {
+    prepare_points_xyz(path, points)?.commit()
+}
+
+/// [`write_points_xyz`] up to the rename (see [`crate::io::atomic::prepare_atomic`]).
+///
+/// # Errors
+/// As [`write_points_xyz`].
+pub fn prepare_points_xyz(path: &Path, points: &[[f64; 3]]) -> Result<Staged> {
     if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
         return Err(Error::invalid(format!("point {i} has a non-finite coordinate {:?}", points[i])));
     }
-    write_atomic(path, |w| write_xyz(w, points))
+    prepare_atomic(path, |w| write_xyz(w, points))
 }
 
 /// Writes points as `.xyz` text to any writer (see [`write_points_xyz`]).

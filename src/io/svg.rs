@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use crate::error::{Error, Result};
-use crate::io::atomic::write_atomic;
+use crate::io::atomic::{prepare_atomic, Staged};
 use crate::math::{add, cross, dot, normalize, scale};
 use crate::mesh::poly::PolyMesh;
 use crate::mesh::quality::edge_uses;
@@ -278,8 +278,16 @@ pub fn render_svg(mesh: &PolyMesh, opts: &RenderOptions) -> String {
 /// # Errors
 /// `Io` naming `path` when the file cannot be written.
 pub fn write_svg(path: &Path, mesh: &PolyMesh, opts: &RenderOptions) -> Result<()> {
+    prepare_svg(path, mesh, opts)?.commit()
+}
+
+/// [`write_svg`] up to the rename (see [`crate::io::atomic::prepare_atomic`]).
+///
+/// # Errors
+/// As [`write_svg`].
+pub fn prepare_svg(path: &Path, mesh: &PolyMesh, opts: &RenderOptions) -> Result<Staged> {
     let svg = render_svg(mesh, opts);
-    write_atomic(path, |w| w.write_all(svg.as_bytes()).map_err(|e| Error::io(path, e)))
+    prepare_atomic(path, |w| w.write_all(svg.as_bytes()).map_err(|e| Error::io(path, e)))
 }
 
 fn header(svg: &mut String, width: f64, height: f64, faces: usize) {

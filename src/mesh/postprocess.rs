@@ -87,6 +87,9 @@ pub struct PostprocessReport {
     /// line ([`is_degenerate_quad`]). Kept, they would pass every topological check and
     /// leave a zero-area quad in the output.
     pub zero_area: usize,
+    /// Faces dropped before anything else because another face has the same four
+    /// corners (repeated, or reversed); the likeliest of them stays (ties: the first).
+    pub duplicates: usize,
     /// Faces deleted by the score filter (a).
     pub removed_by_score: usize,
     /// Faces inserted into the half-edge mesh (b).
@@ -228,7 +231,9 @@ pub fn score_filter(faces: &[[u32; 4]], probs: &[f32], keep: &mut [bool], score_
 
 /// Insertion priorities `p + weight · support`: `support` is the mean, over the face's
 /// four sides a → b, of the highest probability of another kept face running b → a
-/// (0 where none, and for a side repeating a vertex). A true face of a surface has a
+/// (0 where none, and for a side repeating a vertex). A face with `keep[i] == false`
+/// gets `p` alone (the order never inserts it; computing its support cost time
+/// quadratic in the faces on one edge). A true face of a surface has a
 /// true neighbour across every interior edge; a wrong one (over a diagonal, or spanning
 /// two cells) has sides no other face confirms. Candidates come oriented by consistently
 /// propagated normals, so a neighbour runs a shared side the other way round.
@@ -260,6 +265,10 @@ pub fn support_priority(
     let runs = |g: &[u32; 4], a: u32, b: u32| (0..4).any(|i| g[i] == a && g[(i + 1) % 4] == b);
     (0..faces.len())
         .map(|f| {
+            if !keep[f] {
+                // Never inserted by this order; its support is not needed.
+                return probs[f];
+            }
             let fv = faces[f];
             let fe = soup.face_edges(f);
             let support: f32 = (0..4)
@@ -427,6 +436,29 @@ pub fn postprocess_with_reserve(
         if *k && is_degenerate_quad(&f.map(|v| positions[v as usize])) {
             *k = false;
             report.zero_area += 1;
+        }
+    }
+    // Faces over the same corner set: one stays. Thousands of copies of a face otherwise
+    // make the filter and the insertion quadratic (every copy re-scored at each removal).
+    let mut by_set: std::collections::HashMap<[u32; 4], usize> = std::collections::HashMap::new();
+    for i in 0..faces.len() {
+        if !keep[i] {
+            continue;
+        }
+        match by_set.entry(corner_set(faces[i])) {
+            std::collections::hash_map::Entry::Vacant(e) => {
+                e.insert(i);
+            }
+            std::collections::hash_map::Entry::Occupied(mut e) => {
+                let j = *e.get();
+                if probs[i] > probs[j] {
+                    keep[j] = false;
+                    e.insert(i);
+                } else {
+                    keep[i] = false;
+                }
+                report.duplicates += 1;
+            }
         }
     }
     let usable_before_filter = keep.clone();

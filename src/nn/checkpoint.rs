@@ -313,6 +313,6 @@ pub fn save(path: &Path, ckpt: &Checkpoint) -> Result<()> {
 /// # Errors
 /// `Error::Io` when unreadable, `Error::Checkpoint` when invalid.
 pub fn load(path: &Path) -> Result<Checkpoint> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::io::read_input_file(path)?;
     Checkpoint::from_bytes(&bytes, path)
 }

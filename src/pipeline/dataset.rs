@@ -416,7 +416,7 @@ pub fn save_sample(path: &Path, sample: &Sample) -> Result<()> {
 /// # Errors
 /// `Io` when the file cannot be read; otherwise as [`read_sample`], naming the path.
 pub fn load_sample(path: &Path) -> Result<Sample> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::io::read_input_file(path)?;
     read_sample(&bytes, &path.display().to_string())
 }
 

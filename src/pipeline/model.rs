@@ -286,7 +286,9 @@ impl ModelConfig {
             let usize_list = |v: &str| -> Result<Vec<usize>> {
                 v.split(',').map(|x| x.trim().parse::<usize>().map_err(|_| bad("bad width list"))).collect()
             };
-            let num = |v: &str| v.parse::<f32>().map_err(|_| bad("bad number"));
+            // Finite only: an infinite slope or momentum gives NaN probabilities later.
+            let num =
+                |v: &str| v.parse::<f32>().ok().filter(|x| x.is_finite()).ok_or_else(|| bad("bad number"));
             let int = |v: &str| v.parse::<usize>().map_err(|_| bad("bad number"));
             match k {
                 "preset" => c.preset = v.to_string(),
@@ -704,6 +706,27 @@ impl Model {
     /// included).
     pub fn from_checkpoint(ckpt: &Checkpoint, name: &Path) -> Result<Model> {
         let as_ckpt_err = |e: Error| Error::Checkpoint { path: name.to_path_buf(), msg: e.to_string() };
+        // A diverged training run, or a damaged file whose checksum was redone, would
+        // otherwise give NaN probabilities, reported against the input cloud.
+        for (tname, t) in &ckpt.tensors {
+            if let Some(i) = t.data().iter().position(|x| !x.is_finite()) {
+                return Err(Error::Checkpoint {
+                    path: name.to_path_buf(),
+                    msg: format!("tensor {tname} holds a non-finite value ({}) at index {i}", t.data()[i]),
+                });
+            }
+            if tname.ends_with(".running_var") {
+                if let Some(i) = t.data().iter().position(|&x| x < 0.0) {
+                    return Err(Error::Checkpoint {
+                        path: name.to_path_buf(),
+                        msg: format!(
+                            "tensor {tname} holds a negative variance ({}) at index {i}",
+                            t.data()[i]
+                        ),
+                    });
+                }
+            }
+        }
         let text = std::str::from_utf8(&ckpt.config).map_err(|_| Error::Checkpoint {
             path: name.to_path_buf(),
             msg: "model config is not UTF-8".into(),

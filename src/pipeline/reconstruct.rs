@@ -32,6 +32,15 @@ pub struct ReconstructConfig {
     pub run_postprocess: bool,
     /// Post-process settings.
     pub postprocess: PostprocessConfig,
+    /// Near-duplicate merging: two points closer than this share of the distance from
+    /// either to its 8th nearest other point are one point (the first in input order
+    /// is used; see [`near_duplicate_roots`]). A cloud appended to a copy of itself
+    /// moved by a rounding error otherwise fills every neighbourhood with near-copies
+    /// and the surface is lost. Default 0.001: real quad meshes have vertex pairs at
+    /// 0.0011 (`femhead_quad` of `train/`) and 0.015 (`qm_monkey`) of that distance
+    /// (sliver edges), and merging one drops every face at the merged vertex. 0 merges
+    /// exact duplicates only.
+    pub merge_share: f32,
 }
 
 impl Default for ReconstructConfig {
@@ -41,6 +50,7 @@ impl Default for ReconstructConfig {
             threshold: 0.5,
             run_postprocess: true,
             postprocess: PostprocessConfig::default(),
+            merge_share: 0.001,
         }
     }
 }
@@ -60,6 +70,13 @@ pub struct ReconstructReport {
     pub faces: usize,
     /// Vertices added by hole filling.
     pub vertices_added: usize,
+    /// Points left out as exact or near duplicates of an earlier point (in the output
+    /// they are isolated vertices; faces use the first of each group).
+    pub duplicates: usize,
+    /// Points left out as far outliers (see [`far_outliers`]), isolated in the output.
+    pub outliers: usize,
+    /// The first far outlier's index in the input, if any.
+    pub first_outlier: Option<usize>,
     /// (stage, seconds), in pipeline order.
     pub timings: Vec<(&'static str, f64)>,
 }
@@ -125,17 +142,46 @@ pub fn reconstruct_ensemble_with_report(
     // (5 copies of each point left a k = 20 search 4 distinct neighbours, and half the
     // faces of a cube were lost) and add nothing to the surface.
     Frame::fit(points)?;
-    let distinct = distinct_points(points);
-    let uniq: Vec<[f64; 3]> = distinct.iter().map(|&i| points[i as usize]).collect();
-    if uniq.len() < 4 {
-        return Err(Error::invalid(format!(
-            "point cloud has {} distinct point(s) (of {}); at least 4 are needed for a quad",
-            uniq.len(),
+    let mut distinct = distinct_points(points);
+    let too_few = |u: usize| {
+        Error::invalid(format!(
+            "point cloud has {u} distinct point(s) (of {}); at least 4 are needed for a quad",
             points.len()
-        )));
+        ))
+    };
+    if distinct.len() < 4 {
+        return Err(too_few(distinct.len()));
     }
-    let frame = Frame::fit(&uniq)?;
-    let local = frame.to_local_all(&uniq);
+    // Far outliers (a stray point 1e10 away) would squeeze the rest of the cloud into
+    // a speck of the normalised frame, below f32 resolution: left out.
+    let far = far_outliers(&distinct.iter().map(|&i| points[i as usize]).collect::<Vec<_>>());
+    if !far.is_empty() {
+        report.outliers = far.len();
+        report.first_outlier = far.iter().map(|&j| distinct[j] as usize).min();
+        let mut out = vec![false; distinct.len()];
+        far.iter().for_each(|&j| out[j] = true);
+        distinct = distinct.iter().zip(&out).filter(|(_, &o)| !o).map(|(&i, _)| i).collect();
+        if distinct.len() < 4 {
+            return Err(too_few(distinct.len()));
+        }
+    }
+    let mut uniq: Vec<[f64; 3]> = distinct.iter().map(|&i| points[i as usize]).collect();
+    let mut frame = Frame::fit(&uniq)?;
+    let mut local = frame.to_local_all(&uniq);
+    if cfg.merge_share > 0.0 {
+        let roots = near_duplicate_roots(&local, cfg.merge_share);
+        if roots.iter().enumerate().any(|(i, &r)| r as usize != i) {
+            let keep: Vec<usize> = (0..roots.len()).filter(|&i| roots[i] as usize == i).collect();
+            if keep.len() < 4 {
+                return Err(too_few(keep.len()));
+            }
+            distinct = keep.iter().map(|&i| distinct[i]).collect();
+            uniq = distinct.iter().map(|&i| points[i as usize]).collect();
+            frame = Frame::fit(&uniq)?;
+            local = frame.to_local_all(&uniq);
+        }
+    }
+    report.duplicates = points.len() - distinct.len() - report.outliers;
     clock.lap(&mut report, "normalise");
     let cands = generate(&local, &cfg.candidates)?;
     report.candidates = cands.len();
@@ -152,11 +198,12 @@ pub fn reconstruct_ensemble_with_report(
     clock.lap(&mut report, "features");
     let (mut t_classify, mut t_refine) = (0.0, None);
     let mut probs: Vec<f32> = Vec::new();
-    for model in models {
+    for (k, model) in models.iter().enumerate() {
         let x = inputs[model.config().use_context as usize].as_deref().unwrap_or_default();
         // The point encoder (if the model has one) reads the same normalised cloud the
         // candidates were built in, as in training.
         let base = model.predict_base(&local, &cands.quads, x)?;
+        check_probabilities(k, &base)?;
         t_classify += clock.split();
         // Refinement rounds (when the model has them) rescore every candidate by its
         // rivals and neighbours: the same as `predict_with_points`, timed apart.
@@ -168,6 +215,7 @@ pub fn reconstruct_ensemble_with_report(
             }
             None => base,
         };
+        check_probabilities(k, &p)?;
         if probs.is_empty() {
             probs = p;
         } else {
@@ -226,6 +274,105 @@ pub fn reconstruct_ensemble_with_report(
     report.faces = mesh.quads.len();
     clock.lap(&mut report, "postprocess");
     Ok((mesh, report))
+}
+
+/// A model whose output is not a probability (NaN or infinite: diverged or damaged
+/// weights) is the model's fault, not the cloud's: `Error::Checkpoint` with the path
+/// `<model K>` (K its place in the ensemble, from 0), which the CLI replaces by the
+/// file's name.
+fn check_probabilities(k: usize, p: &[f32]) -> Result<()> {
+    match p.iter().position(|x| !x.is_finite()) {
+        None => Ok(()),
+        Some(i) => Err(Error::Checkpoint {
+            path: std::path::PathBuf::from(format!("<model {k}>")),
+            msg: format!(
+                "the network gives a non-finite probability ({}) for candidate {i}: its weights are unusable",
+                p[i]
+            ),
+        }),
+    }
+}
+
+/// How far from the cloud's bulk a point may lie, in units of the bulk's radius (see
+/// [`far_outliers`]).
+pub const OUTLIER_RADII: f64 = 1e4;
+
+/// Indices of the far outliers of `points`: farther from the coordinate-wise median than
+/// [`OUTLIER_RADII`] times the 95th percentile of all points' distances from it. A quad
+/// cannot join such a point to the rest (edge ratios below 1e-4), and normalising the
+/// cloud with it would leave the rest below f32 resolution. Empty when that percentile
+/// is 0 (most points identical) or for fewer than 20 points (no bulk to speak of).
+pub fn far_outliers(points: &[[f64; 3]]) -> Vec<usize> {
+    if points.len() < 20 {
+        return Vec::new();
+    }
+    // In raw coordinates, with a scaled norm: squares overflow at 1e200 and vanish at
+    // 1e-200 (a bulk at 1 beside a point at 1e200 is both). A difference that
+    // overflows is an infinite distance.
+    let mut median = [0.0f64; 3];
+    let mut col: Vec<f64> = Vec::with_capacity(points.len());
+    for (a, m) in median.iter_mut().enumerate() {
+        col.clear();
+        col.extend(points.iter().map(|p| p[a]));
+        let mid = col.len() / 2;
+        *m = *col.select_nth_unstable_by(mid, f64::total_cmp).1;
+    }
+    let norm = |p: &[f64; 3]| {
+        let v = [p[0] - median[0], p[1] - median[1], p[2] - median[2]];
+        let big = v.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+        if big == 0.0 || !big.is_finite() {
+            return big;
+        }
+        big * v.iter().map(|c| (c / big) * (c / big)).sum::<f64>().sqrt()
+    };
+    let d: Vec<f64> = points.iter().map(norm).collect();
+    let mut sorted = d.clone();
+    let at = (sorted.len() * 95) / 100;
+    let r95 = *sorted.select_nth_unstable_by(at, f64::total_cmp).1;
+    if r95 <= 0.0 {
+        return Vec::new();
+    }
+    (0..d.len()).filter(|&i| d[i] > OUTLIER_RADII * r95).collect()
+}
+
+/// Near-duplicate groups of a normalised cloud with no exact duplicates: `roots[i]` is
+/// the smallest index of the group of point `i`. Points `i` and `j` join when `j` is
+/// among the 8 nearest of `i` (or the reverse) and closer than `share` times the
+/// smaller of their distances to their 8th nearest other point; groups are the
+/// transitive closure. Scale-free; a quad mesh's vertices never join (their nearest
+/// other vertex is a sizeable share of their 8th), while a copy of the cloud moved by
+/// a rounding error or a small share of the spacing joins its original.
+pub fn near_duplicate_roots(local: &[[f32; 3]], share: f32) -> Vec<u32> {
+    let n = local.len();
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    if n < 2 {
+        return parent;
+    }
+    let knn = crate::pipeline::candidates::knn_table(local, 8);
+    let reach: Vec<f32> = (0..n).map(|i| knn.row(i).1.last().copied().unwrap_or(0.0).sqrt()).collect();
+    fn root(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            let up = p[p[x as usize] as usize];
+            p[x as usize] = up;
+            x = up;
+        }
+        x
+    }
+    for i in 0..n {
+        let (idx, d2) = knn.row(i);
+        for (&j, &d2) in idx.iter().zip(d2) {
+            if j as usize == i || d2.sqrt() > share * reach[i].min(reach[j as usize]) {
+                continue;
+            }
+            let (a, b) = (root(&mut parent, i as u32), root(&mut parent, j));
+            // The smaller index stays the root, so a group's root is its first point.
+            if a != b {
+                let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+                parent[hi as usize] = lo;
+            }
+        }
+    }
+    (0..n as u32).map(|i| root(&mut parent, i)).collect()
 }
 
 /// Indices of the first occurrence of each distinct point, in input order (`-0.0`

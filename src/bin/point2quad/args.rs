@@ -94,7 +94,8 @@ impl Args {
         T: std::str::FromStr + PartialOrd + std::fmt::Display,
     {
         let v = self.parsed(cmd, name, default)?;
-        if v < lo || v > hi {
+        // Written so that NaN (which compares false with everything) is refused too.
+        if !(v >= lo && v <= hi) {
             return Err(Error::Usage(format!(
                 "{cmd}: {name} must be between {lo} and {hi}, got {v} ({why})"
             )));

@@ -69,6 +69,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let t_read = t0.elapsed();
     // After the input (its errors come first), before the work.
     crate::output::check_output_path(std::path::Path::new(&output))?;
+    crate::output::check_not_input(CMD, std::path::Path::new(&output), std::path::Path::new(input))?;
     // The library's refusals do not know the file; name it (once: not "invalid
     // input: FILE: invalid input: …").
     let named = |e: Error| match e {

@@ -227,6 +227,21 @@ pub fn run(argv: &[String]) -> Result<()> {
         )));
     }
     let made_out = !out.exists();
+    if !made_out && out.is_dir() {
+        // `train` reads every sample in the folder: old ones would join the new set.
+        let old = std::fs::read_dir(&out)
+            .map_err(|e| Error::io(&out, e))?
+            .filter_map(|e| e.ok())
+            .filter(|e| e.path().extension().is_some_and(|x| x == EXTENSION))
+            .count();
+        if old > 0 {
+            return Err(Error::Usage(format!(
+                "{CMD}: {} already holds {old} sample(s) (.{EXTENSION}) from an earlier run, which `train` \
+                 would read with the new ones; give an empty or new folder, or remove them",
+                out.display()
+            )));
+        }
+    }
     std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
     let cand_cfg = CandidateConfig::default();
     let total = jobs.len();
@@ -261,7 +276,24 @@ pub fn run(argv: &[String]) -> Result<()> {
                 (name.clone(), mesh, rng)
             }
         };
-        let sample = build_sample(&name, &mesh, &noise, &cand_cfg, &mut rng)?;
+        let sample = match (build_sample(&name, &mesh, &noise, &cand_cfg, &mut rng), &jobs[k]) {
+            (Ok(s), _) => s,
+            // A mesh file that loads but cannot make a sample (e.g. every face has zero
+            // area, so no noise point can be placed) is skipped like any unusable file.
+            (Err(e), Job::File(path, _) | Job::Coarse(path, _, _) | Job::Stretch(path, _, _)) => {
+                let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                let why = match e {
+                    Error::InvalidInput(m) => m,
+                    other => other.to_string(),
+                };
+                // build_sample's message starts with the sample's name; the path says more.
+                let why = why.strip_prefix(&format!("{name}: ")).unwrap_or(&why);
+                let why = why.strip_prefix("invalid input: ").unwrap_or(why);
+                say!("[{n}/{total}] warning: skipping {}: {why}", path.display());
+                return Ok(None);
+            }
+            (Err(e), Job::Synthetic(_)) => return Err(e),
+        };
         let file = format!("{name}.{EXTENSION}");
         save_sample(&out.join(&file), &sample)?;
         let n = done.fetch_add(1, Ordering::Relaxed) + 1;

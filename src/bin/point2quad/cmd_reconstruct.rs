@@ -2,7 +2,8 @@
 
 use crate::args::{Args, Spec};
 use crate::cmd_candidates::MAX_K;
-use point2quad::io::mesh_io::write_mesh;
+use point2quad::io::atomic::commit_all;
+use point2quad::io::mesh_io::{prepare_mesh_with, WriteOptions};
 use point2quad::io::points::read_points;
 use point2quad::mesh::poly::PolyMesh;
 use point2quad::pipeline::model::Model;
@@ -20,7 +21,9 @@ INPUT is a point cloud (.xyz/.txt/.pts/.csv, .ply, .obj or .off; only positions 
 read; a first line of column names such as x,y,z is skipped), at any scale, pose or
 offset. The output mesh's vertices are the input points, written back exactly and in
 input order (points no face uses stay as isolated vertices), then any vertices hole
-filling added.
+filling added. Duplicate and near-duplicate points count once (faces use the first of
+each group), and far outliers (more than 10,000 times the cloud's radius away) are
+left out; both are reported and stay in the output as isolated vertices.
 
 OPTIONS:
     -o, --output OUT      output mesh; format from the extension (required)
@@ -49,6 +52,9 @@ OPTIONS:
     --no-inverted-fills   never close a 4-edge hole with a quad whose scaled Jacobian
                           is under 0.02 (inverted or folded: the only quad its four
                           corners make); such holes stay open (default: closed)
+    --merge-share F       points closer than F times the distance from either to its
+                          8th nearest other point are one point; 0 merges exact
+                          duplicates only, 0 <= F <= 0.5 [0.001]
     --no-untangle         keep badly shaped faces (scaled Jacobian under 0.02:
                           inverted, folded) as they are (default: re-split each with
                           the faces next to it over the same vertices when that gives
@@ -65,6 +71,7 @@ const SPEC: Spec = Spec {
         "--k",
         "--max-floater-faces",
         "--rescue-min-prob",
+        "--merge-share",
     ],
     switches: &[
         "--no-postprocess",
@@ -128,6 +135,14 @@ pub fn run(argv: &[String]) -> Result<()> {
         pp.hole_fill.loop4_min_scaled_jacobian = pp.close.min_scaled_jacobian;
     }
     pp.close.untangle = !a.switch("--no-untangle");
+    cfg.merge_share = a.parsed_in(
+        cmd,
+        "--merge-share",
+        cfg.merge_share,
+        0.0,
+        0.5,
+        "a share of the 8th-neighbour distance",
+    )?;
     // Check the output names before the work, not after it.
     point2quad::io::mesh_io::MeshFormat::from_path(&out)?;
     let svg = a.value("--svg").map(Path::new);
@@ -144,8 +159,10 @@ pub fn run(argv: &[String]) -> Result<()> {
     let t_read = t0.elapsed().as_secs_f64();
     // The output folders: after the input (its errors come first), before the work.
     crate::output::check_output_path(&out)?;
+    crate::output::check_not_input(cmd, &out, &input)?;
     if let Some(svg) = svg {
         crate::output::check_output_path(svg)?;
+        crate::output::check_not_input(cmd, svg, &input)?;
     }
     let models = match a.value("--model") {
         Some(m) => load_models(cmd, m)?,
@@ -153,21 +170,31 @@ pub fn run(argv: &[String]) -> Result<()> {
     };
     let members: Vec<&Model> = models.iter().collect();
     // The library's refusals (too few points, no extent…) do not know the file.
+    let model_names: Vec<String> = match a.value("--model") {
+        Some(m) if models.len() > 1 => m.split(',').map(str::to_string).collect(),
+        Some(m) => vec![m.to_string()],
+        None => vec!["<shipped fixtures/point2quad-default.p2qm>".to_string()],
+    };
     let (mesh, rep) = reconstruct_ensemble_with_report(&points, &members, &cfg).map_err(|e| match e {
         Error::InvalidInput(m) => Error::invalid(format!("{}: {m}", input.display())),
+        // The library names a model by its place in the ensemble; here it has a file.
+        Error::Checkpoint { path, msg } => {
+            let k = path.to_str().and_then(|p| p.strip_prefix("<model ")).and_then(|p| p.strip_suffix('>'));
+            let name = k.and_then(|k| k.parse::<usize>().ok()).and_then(|k| model_names.get(k));
+            Error::Checkpoint { path: name.map_or(path, PathBuf::from), msg }
+        }
         other => other,
     })?;
     let t1 = std::time::Instant::now();
     let poly = PolyMesh::from(&mesh);
-    write_mesh(&out, &poly)?;
-    if let Some(svg) = a.value("--svg") {
+    // Both files are written in full before either replaces its target: half a result
+    // is worse than none, and a failed preview must not cost the old content of `-o`.
+    let mut staged = vec![prepare_mesh_with(&out, &poly, &WriteOptions::default())?];
+    if let Some(svg) = svg {
         let opts = point2quad::io::svg::RenderOptions::default();
-        if let Err(e) = point2quad::io::svg::write_svg(Path::new(svg), &poly, &opts) {
-            // Half a result is worse than none (and a rerun would not notice it).
-            let _ = std::fs::remove_file(&out);
-            return Err(e);
-        }
+        staged.push(point2quad::io::svg::prepare_svg(svg, &poly, &opts)?);
     }
+    commit_all(staged)?;
     let t_write = t1.elapsed().as_secs_f64();
     let stages: Vec<String> = std::iter::once(("read", t_read))
         .chain(rep.timings.iter().copied())
@@ -198,6 +225,21 @@ pub fn run(argv: &[String]) -> Result<()> {
         pp.close.untangled,
         out.display()
     ));
+    if rep.duplicates > 0 {
+        crate::output::stderr(&format!(
+            "reconstruct: {} duplicate or near-duplicate point(s) counted once (see --merge-share)\n",
+            rep.duplicates
+        ));
+    }
+    if let Some(i) = rep.first_outlier {
+        crate::output::stderr(&format!(
+            "reconstruct: warning: {}: {} far outlier(s) left out (more than {:.0e} times the cloud's radius away); the first is point {i} (counting from 0) at {:?}\n",
+            input.display(),
+            rep.outliers,
+            point2quad::pipeline::reconstruct::OUTLIER_RADII,
+            points[i]
+        ));
+    }
     if rep.faces == 0 {
         crate::output::stderr(&format!(
             "reconstruct: warning: no faces: {} holds no surface the model recognises \

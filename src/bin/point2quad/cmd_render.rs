@@ -79,5 +79,6 @@ pub fn run(argv: &[String]) -> Result<()> {
     opts.face_edges = !args.switch("--no-edges");
     let mesh = read_mesh(Path::new(input))?;
     crate::output::check_output_path(Path::new(out))?;
+    crate::output::check_not_input("render", Path::new(out), Path::new(input))?;
     write_svg(Path::new(out), &mesh, &opts)
 }

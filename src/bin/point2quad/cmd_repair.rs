@@ -76,6 +76,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let poly = read_mesh(Path::new(input))?;
     // After the input (its errors come first), before the work.
     crate::output::check_output_path(Path::new(output))?;
+    crate::output::check_not_input("repair", Path::new(output), Path::new(input))?;
     let (quads, dropped) = if a.switch("--drop-non-quads") {
         let (q, d) = poly.to_quads_lossy();
         (q, d)
@@ -95,10 +96,11 @@ pub fn run(argv: &[String]) -> Result<()> {
     say!("repair {input} -> {output}");
     say!(
         "  faces read {}, non-quads dropped {dropped}, degenerate dropped {} (repeated vertex), \
-         zero-area dropped {} (coincident or collinear corners)",
+         zero-area dropped {} (coincident or collinear corners), duplicates dropped {} (same corners)",
         rep.faces_in,
         rep.degenerate,
-        rep.zero_area
+        rep.zero_area,
+        rep.duplicates
     );
     if cfg.score_filter {
         say!("  score filter (limit {}): removed {}", cfg.score_limit, rep.removed_by_score);

@@ -3,8 +3,9 @@
 //! written as ground truth. Used by `make demo` and handy for trying the tool.
 
 use crate::args::{Args, Spec};
-use point2quad::io::mesh_io::{read_mesh, write_mesh, MeshFormat};
-use point2quad::io::points::{write_points_xyz, PointFormat};
+use point2quad::io::atomic::commit_all;
+use point2quad::io::mesh_io::{prepare_mesh_with, read_mesh, MeshFormat, WriteOptions};
+use point2quad::io::points::{prepare_points_xyz, PointFormat};
 use point2quad::mesh::poly::PolyMesh;
 use point2quad::mesh::shapes::{random_shape, random_shape_of, Family};
 use point2quad::pipeline::noise::{noise_points, NoiseConfig};
@@ -54,6 +55,12 @@ pub fn run(argv: &[String]) -> Result<()> {
     if let Some(gt) = a.value("--gt") {
         MeshFormat::from_path(Path::new(gt))?;
         crate::output::check_output_path(Path::new(gt))?;
+        if let Some(from) = a.value("--from") {
+            crate::output::check_not_input(cmd, Path::new(gt), Path::new(from))?;
+        }
+    }
+    if let Some(from) = a.value("--from") {
+        crate::output::check_not_input(cmd, Path::new(out), Path::new(from))?;
     }
     let seed = a.parsed(cmd, "--seed", 0u64)?;
     let noise =
@@ -80,14 +87,13 @@ pub fn run(argv: &[String]) -> Result<()> {
     };
     let mut cloud = mesh.vertices.clone();
     cloud.extend(noise_points(&mesh, &noise, &mut rng)?);
-    write_points_xyz(Path::new(out), &cloud)?;
+    // Both files in full before either replaces its target: half a result is worse
+    // than none, and a failed --gt must not cost the old content of -o.
+    let mut staged = vec![prepare_points_xyz(Path::new(out), &cloud)?];
     if let Some(gt) = a.value("--gt") {
-        if let Err(e) = write_mesh(Path::new(gt), &PolyMesh::from(&mesh)) {
-            // Half a result is worse than none: the cloud without its ground truth goes.
-            let _ = std::fs::remove_file(out);
-            return Err(e);
-        }
+        staged.push(prepare_mesh_with(Path::new(gt), &PolyMesh::from(&mesh), &WriteOptions::default())?);
     }
+    commit_all(staged)?;
     let shape = a.value("--from").unwrap_or(shape);
     crate::output::stderr(&format!(
         "synth: {shape} (seed {seed}): {} vertices, {} quads, {} noise points -> {out}\n",

@@ -62,3 +62,21 @@ pub fn check_output_path(path: &std::path::Path) -> Result<()> {
     }
     Ok(())
 }
+
+/// Refuses an output that is the input file itself (the same file under any name):
+/// `reconstruct m.obj -o m.obj` would replace the input with the result.
+///
+/// # Errors
+/// `Usage` naming both when `out` exists and is the same file as `input`.
+pub fn check_not_input(cmd: &str, out: &std::path::Path, input: &std::path::Path) -> Result<()> {
+    if let (Ok(a), Ok(b)) = (std::fs::canonicalize(out), std::fs::canonicalize(input)) {
+        if a == b {
+            return Err(Error::Usage(format!(
+                "{cmd}: output {} is the input file {}; choose another output name",
+                out.display(),
+                input.display()
+            )));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,266 @@
+//! What `reconstruct` does with inputs that are not the clean quad-vertex clouds it was
+//! built for (session 16's audit), through the library API: near-duplicate points
+//! (against a brute-force reference), far outliers, duplicate faces in the
+//! post-process, and weights that give non-finite probabilities.
+
+use point2quad::mesh::postprocess::{postprocess, PostprocessConfig};
+use point2quad::mesh::shapes::{self, Family};
+use point2quad::pipeline::frame::Frame;
+use point2quad::pipeline::model::{Model, ModelConfig};
+use point2quad::pipeline::reconstruct::{
+    far_outliers, near_duplicate_roots, reconstruct, reconstruct_with_report, ReconstructConfig,
+    OUTLIER_RADII,
+};
+use point2quad::rng::Rng;
+use point2quad::Error;
+use proptest::prelude::*;
+use std::sync::OnceLock;
+
+fn model() -> &'static Model {
+    static M: OnceLock<Model> = OnceLock::new();
+    M.get_or_init(|| Model::new(ModelConfig::default_preset(), 7).expect("test: model"))
+}
+
+/// The rule of `near_duplicate_roots` by brute force: the 8 nearest other points of
+/// each point by sorting all distances (f32, as the kd-tree computes them), the join
+/// test on every pair where one is among the other's 8 nearest, and groups by
+/// repeated relabelling to the smallest index until nothing changes.
+fn roots_brute_force(p: &[[f32; 3]], share: f32) -> Vec<u32> {
+    let n = p.len();
+    let d2 = |a: [f32; 3], b: [f32; 3]| {
+        let (x, y, z) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
+        x * x + y * y + z * z
+    };
+    let nearest: Vec<Vec<(f32, usize)>> = (0..n)
+        .map(|i| {
+            let mut v: Vec<(f32, usize)> = (0..n).filter(|&j| j != i).map(|j| (d2(p[i], p[j]), j)).collect();
+            v.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            v.truncate(8);
+            v
+        })
+        .collect();
+    let reach: Vec<f32> = nearest.iter().map(|v| v.last().map_or(0.0, |x| x.0.sqrt())).collect();
+    let mut label: Vec<u32> = (0..n as u32).collect();
+    loop {
+        let mut changed = false;
+        for i in 0..n {
+            for &(d, j) in &nearest[i] {
+                if d.sqrt() <= share * reach[i].min(reach[j]) {
+                    let m = label[i].min(label[j]);
+                    if label[i] != m || label[j] != m {
+                        label[i] = m;
+                        label[j] = m;
+                        changed = true;
+                    }
+                }
+            }
+        }
+        if !changed {
+            return label;
+        }
+    }
+}
+
+/// A random cloud in the unit cube with `copies` of its first points moved by tiny
+/// amounts (some below, some above the share), shuffled in.
+fn cloud_with_copies(seed: u64, n: usize, copies: usize) -> Vec<[f32; 3]> {
+    let mut rng = Rng::new(seed);
+    let mut p: Vec<[f32; 3]> = (0..n).map(|_| [rng.f32(), rng.f32(), rng.f32()]).collect();
+    for c in 0..copies {
+        let src = p[rng.below(n)];
+        let eps = [1e-7f32, 1e-5, 1e-4, 3e-3, 2e-2][c % 5];
+        p.push([src[0] + eps * (rng.f32() - 0.5), src[1] + eps, src[2]]);
+    }
+    rng.shuffle(&mut p);
+    p
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// The grouping equals the brute-force reference (random clouds: distance ties have
+    /// probability zero), and every root is the smallest index of its group.
+    #[test]
+    fn near_duplicate_roots_match_brute_force(seed in any::<u64>(), n in 9usize..120, copies in 0usize..30, share in prop::sample::select(vec![0.001f32, 0.01, 0.05])) {
+        let p = cloud_with_copies(seed, n, copies);
+        let got = near_duplicate_roots(&p, share);
+        prop_assert_eq!(&got, &roots_brute_force(&p, share));
+        for (i, &r) in got.iter().enumerate() {
+            prop_assert!(r as usize <= i && got[r as usize] == r);
+        }
+    }
+
+    /// The vertices of a quad mesh never join: every synthetic family, random pose and
+    /// scale, at the default share.
+    #[test]
+    fn quad_mesh_vertices_are_never_near_duplicates(seed in any::<u64>(), f in 0usize..Family::ALL.len()) {
+        let mut rng = Rng::new(seed);
+        let mesh = shapes::random_shape_of(Family::ALL[f], &mut rng);
+        let frame = Frame::fit(&mesh.vertices).expect("test: frame");
+        let local = frame.to_local_all(&mesh.vertices);
+        let share = ReconstructConfig::default().merge_share;
+        let roots = near_duplicate_roots(&local, share);
+        prop_assert!(roots.iter().enumerate().all(|(i, &r)| r as usize == i), "{:?}", Family::ALL[f]);
+    }
+
+    /// Far outliers are exactly the points beyond OUTLIER_RADII × the 95th percentile
+    /// of the distances from the coordinate-wise median (brute force: sorted copies),
+    /// at any offset and scale.
+    #[test]
+    fn far_outliers_match_their_definition(seed in any::<u64>(), n in 20usize..200, k in 0usize..5, e in -100i32..100) {
+        let mut rng = Rng::new(seed);
+        let s = 2f64.powi(e);
+        let mut p: Vec<[f64; 3]> = (0..n).map(|_| [rng.f64() * s + 3.0 * s, rng.f64() * s, rng.f64() * s]).collect();
+        for _ in 0..k {
+            let far = s * 10f64.powf(2.0 + 8.0 * rng.f64());
+            let i = rng.below(p.len() + 1);
+            p.insert(i, [far, -far * rng.f64(), s]);
+        }
+        let med = |a: usize| {
+            let mut c: Vec<f64> = p.iter().map(|q| q[a]).collect();
+            c.sort_by(f64::total_cmp);
+            c[c.len() / 2]
+        };
+        let m = [med(0), med(1), med(2)];
+        let d: Vec<f64> = p.iter().map(|q| ((q[0] - m[0]).powi(2) + (q[1] - m[1]).powi(2) + (q[2] - m[2]).powi(2)).sqrt()).collect();
+        let mut sd = d.clone();
+        sd.sort_by(f64::total_cmp);
+        let r95 = sd[sd.len() * 95 / 100];
+        let want: Vec<usize> = (0..p.len()).filter(|&i| d[i] > OUTLIER_RADII * r95 * (1.0 + 1e-12)).collect();
+        let got = far_outliers(&p);
+        // Points within rounding of the bound could go either way; none is drawn there.
+        let borderline = d.iter().any(|&x| (x / (OUTLIER_RADII * r95) - 1.0).abs() < 1e-9);
+        prop_assume!(!borderline);
+        prop_assert_eq!(got, want);
+    }
+}
+
+/// A cloud plus a copy moved by a rounding-size amount gives the faces of the cloud
+/// (on the first occurrences), with the copies counted as duplicates; with merging off
+/// (share 0) the copies are separate points and the result differs.
+#[test]
+fn near_copies_give_the_faces_of_the_cloud() {
+    let mesh = shapes::torus(16, 8, 1.0, 0.35);
+    let pts = mesh.vertices.clone();
+    let cfg = ReconstructConfig { threshold: 0.3, ..Default::default() };
+    let (clean, _) = reconstruct_with_report(&pts, model(), &cfg).expect("clean");
+    assert!(clean.quads.len() > 50, "{}", clean.quads.len());
+    let mut both = pts.clone();
+    both.extend(pts.iter().map(|p| [p[0] * (1.0 + 1e-9), p[1] - 1e-9, p[2]]));
+    let (m, rep) = reconstruct_with_report(&both, model(), &cfg).expect("with copies");
+    assert_eq!(rep.duplicates, pts.len());
+    // Vertices the hole filling added come after the input points: past the copies.
+    let past = |i: u32| if (i as usize) < pts.len() { i } else { i + pts.len() as u32 };
+    assert_eq!(m.quads, clean.quads.iter().map(|q| q.map(past)).collect::<Vec<_>>());
+    assert_eq!(&m.vertices[..both.len()], &both[..]);
+    let off = ReconstructConfig { merge_share: 0.0, ..cfg };
+    let (m0, rep0) = reconstruct_with_report(&both, model(), &off).expect("merging off");
+    assert_eq!(rep0.duplicates, 0);
+    assert_ne!(m0.quads, clean.quads);
+}
+
+/// A far outlier is left out (reported with its input index) and the rest gives the
+/// faces it gives alone; the outlier stays in the output as an isolated vertex.
+#[test]
+fn a_far_outlier_leaves_the_rest_unchanged() {
+    let pts = shapes::cube_sphere(5).vertices;
+    let cfg = ReconstructConfig { threshold: 0.3, ..Default::default() };
+    let alone = reconstruct(&pts, model(), &cfg).expect("alone");
+    assert!(!alone.quads.is_empty());
+    for far in [1e9, 1e40, -1e300] {
+        let mut with = pts.clone();
+        with.insert(3, [far, 0.5, far.abs().sqrt()]);
+        let (m, rep) = reconstruct_with_report(&with, model(), &cfg).expect("with outlier");
+        assert_eq!((rep.outliers, rep.first_outlier), (1, Some(3)), "{far}");
+        let shift = |i: u32| if i >= 3 { i + 1 } else { i };
+        assert_eq!(m.quads, alone.quads.iter().map(|q| q.map(shift)).collect::<Vec<_>>(), "{far}");
+        assert!(m.quads.iter().all(|q| !q.contains(&3)));
+        assert_eq!(m.vertices[3], with[3]);
+    }
+}
+
+/// The post-process keeps one face per corner set: a grid's faces given three times
+/// (the copies reversed or rotated, with other probabilities) give the grid's mesh,
+/// with the duplicates counted; the likeliest copy is the one inserted.
+#[test]
+fn repeated_faces_count_once_in_the_post_process() {
+    let grid = shapes::grid(5, 4, 1.0, 1.0);
+    let n = grid.quads.len();
+    let probs = vec![0.9f32; n];
+    let (want, rep0) =
+        postprocess(&grid.vertices, &grid.quads, &probs, &PostprocessConfig::default()).expect("grid");
+    assert_eq!(rep0.duplicates, 0);
+    let mut faces = grid.quads.clone();
+    let mut p = probs.clone();
+    for q in &grid.quads {
+        faces.push([q[3], q[2], q[1], q[0]]);
+        p.push(0.5);
+        faces.push([q[1], q[2], q[3], q[0]]);
+        p.push(0.4);
+    }
+    let (got, rep) =
+        postprocess(&grid.vertices, &faces, &p, &PostprocessConfig::default()).expect("repeated");
+    assert_eq!(rep.duplicates, 2 * n);
+    assert_eq!(got.quads.len(), want.quads.len());
+    let set = |m: &point2quad::mesh::poly::QuadMesh| {
+        let mut v: Vec<[u32; 4]> = m
+            .quads
+            .iter()
+            .map(|q| {
+                let mut k = *q;
+                k.sort_unstable();
+                k
+            })
+            .collect();
+        v.sort_unstable();
+        v
+    };
+    assert_eq!(set(&got), set(&want));
+    // A reversed copy that is likelier than the original is the one kept.
+    let mut f2 = grid.quads.clone();
+    let mut p2 = vec![0.6f32; n];
+    f2.push([grid.quads[0][3], grid.quads[0][2], grid.quads[0][1], grid.quads[0][0]]);
+    p2.push(0.95);
+    let (_, rep2) =
+        postprocess(&grid.vertices, &f2, &p2, &PostprocessConfig::default()).expect("likelier copy");
+    assert_eq!(rep2.duplicates, 1);
+}
+
+/// Weights with a non-finite value are refused when loaded, naming the tensor; so is a
+/// negative batch-norm variance. A model whose probabilities are not finite anyway is
+/// caught at the first one, as the model's fault (`Checkpoint`, `<model 0>`), not the
+/// cloud's.
+#[test]
+fn unusable_weights_are_the_models_fault() {
+    let m = Model::new(ModelConfig::default_preset(), 3).expect("test: model");
+    let ckpt = m.to_checkpoint(None);
+    let name = std::path::Path::new("w.p2qm");
+    assert!(Model::from_checkpoint(&ckpt, name).is_ok());
+    let mut bad = ckpt.clone();
+    let idx = bad.tensors.iter().position(|(n, _)| !n.ends_with("running_var")).expect("test: a weight");
+    bad.tensors[idx].1.data_mut()[0] = f32::NAN;
+    let e = Model::from_checkpoint(&bad, name).err().expect("NaN weight refused").to_string();
+    assert!(e.contains("w.p2qm") && e.contains(&bad.tensors[idx].0) && e.contains("non-finite"), "{e}");
+    let mut neg = ckpt.clone();
+    let v = neg.tensors.iter().position(|(n, _)| n.ends_with("running_var")).expect("test: a BN buffer");
+    neg.tensors[v].1.data_mut()[0] = -1.0;
+    let e = Model::from_checkpoint(&neg, name).err().expect("negative variance refused").to_string();
+    assert!(e.contains("negative variance"), "{e}");
+    // Weights changed in memory (an embedder's own, or a bug) bypass the load check:
+    // the first non-finite probability stops the reconstruction.
+    // (Every weight: a NaN in one early layer can be swallowed by a ReLU's max.)
+    let mut broken = m;
+    let ids: Vec<_> =
+        broken.params.ids().filter(|&id| !broken.params.name(id).ends_with("running_var")).collect();
+    for id in ids {
+        broken.params.get_mut(id).data_mut().iter_mut().for_each(|x| *x = f32::NAN);
+    }
+    let pts = shapes::cube_sphere(4).vertices;
+    match reconstruct(&pts, &broken, &ReconstructConfig::default()) {
+        Err(Error::Checkpoint { path, msg }) => {
+            assert_eq!(path, std::path::PathBuf::from("<model 0>"));
+            assert!(msg.contains("non-finite probability"), "{msg}");
+        }
+        other => panic!("expected the model's error, got {other:?}"),
+    }
+}

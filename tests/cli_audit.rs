@@ -441,3 +441,22 @@ fn dataset_skips_zero_area_meshes_and_refuses_a_folder_with_samples() {
     assert_fails(&again, 2, &["already holds 1 sample"], "dataset into a folder with samples");
     assert!(!dir.path("data/synthetic_0000.p2qs").exists() && dir.path("data/grid.p2qs").exists());
 }
+
+/// An option given twice (`-o a -o b`, `-o a --output b`, `--svg` twice) was taken
+/// silently, one way or the other; it is a usage error now.
+#[test]
+fn an_option_given_twice_is_a_usage_error() {
+    let dir = Scratch::new("audit16_twice");
+    let cloud = dir.write("c.xyz", &xyz(&cube_cloud(1.0)));
+    let (a, b) = (dir.p("a.obj"), dir.p("b.obj"));
+    let cases: Vec<Vec<&str>> = vec![
+        vec!["reconstruct", &cloud, "-o", &a, "-o", &b],
+        vec!["reconstruct", &cloud, "-o", &a, "--output", &b],
+        vec!["reconstruct", &cloud, "--output", &a, "-o", &b],
+        vec!["reconstruct", &cloud, "-o", &a, "--threshold", "0.4", "--threshold=0.6"],
+    ];
+    for args in &cases {
+        assert_fails(&p2q(args), 2, &["given twice"], &format!("{args:?}"));
+    }
+    assert!(!std::path::Path::new(&a).exists() && !std::path::Path::new(&b).exists());
+}

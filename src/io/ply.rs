@@ -133,12 +133,18 @@ struct Header {
 }
 
 fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
-    let mut pos = 0;
+    // A UTF-8 byte-order mark before `ply` (some Windows editors write one).
+    let mut pos = if bytes.starts_with(b"\xEF\xBB\xBF") { 3 } else { 0 };
+    // The header's line ends are those of its first line: `\n`, `\r\n` or a lone `\r`
+    // (old Mac files). Deciding once keeps a binary body that starts with a 0x0A byte
+    // from being read as the end of a `\r\n`.
+    let cr_only = bytes[pos..].starts_with(b"ply\r") && !bytes[pos..].starts_with(b"ply\r\n");
+    let eol = if cr_only { b'\r' } else { b'\n' };
     let mut ln = 0;
     let mut format = None;
     let mut elements: Vec<Element> = Vec::new();
     loop {
-        let Some(nl) = bytes[pos..].iter().position(|&b| b == b'\n') else {
+        let Some(nl) = bytes[pos..].iter().position(|&b| b == eol) else {
             return Err(Error::parse(name, ln + 1, "header not terminated by 'end_header'"));
         };
         let mut line = &bytes[pos..pos + nl];
@@ -219,8 +225,20 @@ fn eof(name: &str, what: &dyn std::fmt::Display) -> Error {
 /// Reads values from the body, whatever the encoding. Errors name the element
 /// instance (`what`), plus the line for ASCII.
 enum Cursor<'a> {
-    Ascii { lines: Lines<'a>, toks: Tokens<'a>, line: usize, first_line: usize },
-    Binary { data: &'a [u8], pos: usize, big: bool },
+    /// `item_line`: the body line where the current element instance began (0 before
+    /// its first value), so that [`Cursor::end_item`] can hold each instance to one line.
+    Ascii {
+        lines: Lines<'a>,
+        toks: Tokens<'a>,
+        line: usize,
+        first_line: usize,
+        item_line: usize,
+    },
+    Binary {
+        data: &'a [u8],
+        pos: usize,
+        big: bool,
+    },
 }
 
 impl<'a> Cursor<'a> {
@@ -232,15 +250,42 @@ impl<'a> Cursor<'a> {
     }
 
     fn next_token(&mut self) -> Option<&'a [u8]> {
-        let Cursor::Ascii { lines, toks, line, .. } = self else { return None };
+        let Cursor::Ascii { lines, toks, line, item_line, .. } = self else { return None };
         loop {
             if let Some(t) = toks.next() {
+                if *item_line == 0 {
+                    *item_line = *line;
+                }
                 return Some(t);
             }
             let (l, text) = lines.next()?;
             *line = l;
             *toks = Tokens::new(text);
         }
+    }
+
+    /// Ends one element instance. In ASCII each instance is one line (PLY's layout):
+    /// values left on its line, or an instance that ran over to the next line, mean the
+    /// line does not match the header (read as one stream, a line of 4 values and one of
+    /// 2 made two valid vertices).
+    fn end_item(&mut self, name: &str, what: &dyn std::fmt::Display) -> Result<()> {
+        let Cursor::Ascii { toks, line, first_line, item_line, .. } = self else { return Ok(()) };
+        let start = std::mem::replace(item_line, 0);
+        if start != 0 && start != *line {
+            return Err(Error::parse(
+                name,
+                start + *first_line,
+                format!("{what}: the line ends before the values the header declares"),
+            ));
+        }
+        if toks.next().is_some() {
+            return Err(Error::parse(
+                name,
+                *line + *first_line,
+                format!("{what}: the line has more values than the header declares"),
+            ));
+        }
+        Ok(())
     }
 
     fn take(&mut self, n: usize) -> Option<&'a [u8]> {
@@ -327,11 +372,21 @@ pub fn parse_ply(bytes: &[u8], name: &str) -> Result<PolyMesh> {
 /// any other (so its contents are not checked beyond its length).
 pub(crate) fn parse_ply_with(bytes: &[u8], name: &str, want_faces: bool) -> Result<PolyMesh> {
     let h = parse_header(bytes, name)?;
-    let body = &bytes[h.data_start..];
+    let raw_body = &bytes[h.data_start..];
+    // An ASCII body with lone-`\r` line ends (the header's were read the same way).
+    let text_body = match h.format {
+        Format::Ascii => super::text::cr_lines(raw_body),
+        Format::Binary { .. } => std::borrow::Cow::Borrowed(raw_body),
+    };
+    let body: &[u8] = &text_body;
     let mut cur = match h.format {
-        Format::Ascii => {
-            Cursor::Ascii { lines: Lines::new(body), toks: Tokens::new(b""), line: 0, first_line: h.lines }
-        }
+        Format::Ascii => Cursor::Ascii {
+            lines: Lines::new(body),
+            toks: Tokens::new(b""),
+            line: 0,
+            first_line: h.lines,
+            item_line: 0,
+        },
         Format::Binary { big } => Cursor::Binary { data: body, pos: 0, big },
     };
     let mut mesh = PolyMesh::default();
@@ -358,6 +413,7 @@ pub(crate) fn parse_ply_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
                     for p in &el.props {
                         cur.skip_prop(p.kind, name, &what)?;
                     }
+                    cur.end_item(name, &what)?;
                 }
             }
         }
@@ -478,6 +534,7 @@ fn read_vertices(
                 kind => cur.skip_prop(kind, name, &what)?,
             }
         }
+        cur.end_item(name, &what)?;
         out.push(finite(p, i, line)?);
     }
     Ok(())
@@ -536,6 +593,7 @@ fn read_faces(
             }
             out.push(face);
         }
+        cur.end_item(name, &what)?;
     }
     Ok(())
 }
@@ -692,6 +750,29 @@ mod tests {
         assert_eq!(m.faces, vec![vec![0, 1, 2]]);
     }
 
+    /// A UTF-8 byte-order mark before `ply`, and lone-`\r` line ends (header and ASCII
+    /// body), read like the plain file; a binary body after a `\r` header is untouched.
+    #[test]
+    fn bom_and_cr_only_line_ends_read_like_the_plain_file() {
+        let src = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n\
+                   property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n\
+                   0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n";
+        let want = parse_ply(src.as_bytes(), "t.ply").unwrap();
+        let bom = [b"\xEF\xBB\xBF".as_slice(), src.as_bytes()].concat();
+        assert_eq!(parse_ply(&bom, "t.ply").unwrap(), want);
+        let cr = src.replace('\n', "\r");
+        assert_eq!(parse_ply(cr.as_bytes(), "t.ply").unwrap(), want);
+        // Binary little-endian with a `\r` header: a body starting with 0x0A stays data.
+        let mut b = b"ply\rformat binary_little_endian 1.0\relement vertex 1\rproperty float x\r\
+                      property float y\rproperty float z\rend_header\r"
+            .to_vec();
+        for v in [f32::from_le_bytes([0x0A, 0, 0x80, 0x3F]), 2.0, 3.0] {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        let m = parse_ply(&b, "t.ply").unwrap();
+        assert_eq!(m.vertices, vec![[f32::from_le_bytes([0x0A, 0, 0x80, 0x3F]) as f64, 2.0, 3.0]]);
+    }
+
     #[test]
     fn errors_name_file_and_line_or_element() {
         let head = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
@@ -709,6 +790,11 @@ mod tests {
             (format!("{head}0 0 0\n1 0 0\n0 1 0\n"), "t.ply: truncated: file ends in face 0 of 1 declared"),
             (format!("{head}0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 1 2\n"), "t.ply:14: data after the last element"),
             (format!("{head}0 0 0\n1 0 0\n0 1 0\n-3 0 1 2\n"), "t.ply:13: face 0 of 1 declared: negative list length"),
+            // One element instance per line: a line of 4 values and one of 2 are not
+            // two vertices.
+            (format!("{head}0 0 0 7\n1 0\n0 1 0\n3 0 1 2\n"), "t.ply:10: vertex 0 of 3 declared: the line has more values"),
+            (format!("{head}0 0\n0 1 0 0\n0 1 0\n3 0 1 2\n"), "t.ply:10: vertex 0 of 3 declared: the line ends before"),
+            (format!("{head}0 0 0\n1 0 0\n0 1 0\n3 0 1\n2\n"), "t.ply:13: face 0 of 1 declared: the line ends before"),
         ];
         for (src, want) in &cases {
             let e = parse_ply(src.as_bytes(), "t.ply").unwrap_err().to_string();

@@ -56,6 +56,20 @@ impl Args {
                             "{cmd}: option {name} needs a non-empty value (see `point2quad {cmd} --help`)"
                         )));
                     }
+                    // Given twice (`-o a -o b`, or `-o a --output b`): which one was
+                    // meant cannot be known, and taking either silently surprises.
+                    fn alias(n: &str) -> &str {
+                        if n == "--output" {
+                            "-o"
+                        } else {
+                            n
+                        }
+                    }
+                    if let Some((prev, _)) = a.values.iter().find(|(n, _)| alias(n) == alias(&name)) {
+                        return Err(Error::Usage(format!(
+                            "{cmd}: option {name} given twice ({prev} already set; see `point2quad {cmd} --help`)"
+                        )));
+                    }
                     a.values.push((name, v));
                 } else if spec.switches.contains(&name.as_str()) && inline.is_none() {
                     a.switches.push(name);

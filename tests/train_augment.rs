@@ -280,7 +280,7 @@ fn cli_augmentation_options_parse_and_refuse_bad_values() {
         (&["--scale", "a,1"], "cannot parse \"a\""),
         (&["--jitter", "-0.1"], "--jitter must be between 0 and 1, got -0.1"),
         (&["--jitter", "2"], "--jitter must be between 0 and 1, got 2"),
-        (&["--jitter", "NaN"], "--jitter must be a number"),
+        (&["--jitter", "NaN"], "--jitter must be between 0 and 1, got NaN"),
         (&["--no-augment", "--scale", "0.9,1.1"], "--no-augment cannot be combined"),
         (&["--no-augment", "--no-rotate"], "--no-augment cannot be combined"),
     ];

@@ -258,11 +258,9 @@ fn augmentation(a: &Args, cfg: &mut TrainConfig) -> Result<()> {
         let (lo, hi) = parse_scale(v)?;
         cfg.scale = if lo == 1.0 && hi == 1.0 { None } else { Some((lo, hi)) };
     }
+    // `parsed_in` refuses NaN too.
     cfg.jitter =
         a.parsed_in(cmd, "--jitter", cfg.jitter, 0.0, 1.0, "a fraction of the local point spacing")?;
-    if cfg.jitter.is_nan() {
-        return Err(Error::Usage("train: --jitter must be a number between 0 and 1, got NaN".into()));
-    }
     Ok(())
 }
 

@@ -153,6 +153,11 @@ fn near_copies_give_the_faces_of_the_cloud() {
     let past = |i: u32| if (i as usize) < pts.len() { i } else { i + pts.len() as u32 };
     assert_eq!(m.quads, clean.quads.iter().map(|q| q.map(past)).collect::<Vec<_>>());
     assert_eq!(&m.vertices[..both.len()], &both[..]);
+    for bad in [f32::NAN, -0.1, 0.51, f32::INFINITY] {
+        let c = ReconstructConfig { merge_share: bad, ..cfg.clone() };
+        let e = reconstruct(&both, model(), &c).unwrap_err().to_string();
+        assert!(e.contains("merge share"), "{bad}: {e}");
+    }
     let off = ReconstructConfig { merge_share: 0.0, ..cfg };
     let (m0, rep0) = reconstruct_with_report(&both, model(), &off).expect("merging off");
     assert_eq!(rep0.duplicates, 0);
@@ -263,4 +268,94 @@ fn unusable_weights_are_the_models_fault() {
         }
         other => panic!("expected the model's error, got {other:?}"),
     }
+}
+
+/// An embedder may set any field of `ReconstructConfig`: random values for every
+/// threshold and count (NaN, ±inf, negative, zero, huge, ordinary) must give either an
+/// error or a valid manifold pure-quad mesh whose first vertices are the input, never a
+/// panic.
+#[test]
+fn any_config_gives_a_valid_mesh_or_an_error() {
+    use point2quad::mesh::halfedge::HalfedgeMesh;
+    use point2quad::mesh::validate::validate;
+    let mesh = shapes::torus(12, 6, 1.0, 0.4);
+    let mut rng = Rng::new(5);
+    let mut pts = mesh.vertices.clone();
+    let noise = point2quad::pipeline::noise::NoiseConfig::default();
+    pts.extend(point2quad::pipeline::noise::noise_points(&mesh, &noise, &mut rng).expect("test: noise"));
+    let floats = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -1.0, 0.0, 0.02, 0.3, 0.5, 0.9, 1.0, 7.0, 1e9];
+    let counts = [0usize, 1, 2, 3, 7, 20, 64, 100_000];
+    let (mut ok, mut err) = (0, 0);
+    for case in 0..200u64 {
+        let mut r = Rng::new(1000 + case);
+        let mut f = || floats[r.below(floats.len())];
+        let mut c = ReconstructConfig::default();
+        // Each field is changed with probability 1/3, so most cases stay near the defaults.
+        let mut r2 = Rng::new(7 + case);
+        let mut pick = || r2.below(3) == 0;
+        macro_rules! maybe {
+            ($field:expr, f32) => {
+                if pick() {
+                    $field = f() as f32;
+                }
+            };
+            ($field:expr, f64) => {
+                if pick() {
+                    $field = f();
+                }
+            };
+            ($field:expr, usize) => {
+                if pick() {
+                    $field = counts[(f().to_bits() % counts.len() as u64) as usize];
+                }
+            };
+        }
+        maybe!(c.threshold, f32);
+        maybe!(c.merge_share, f32);
+        maybe!(c.candidates.k, usize);
+        maybe!(c.candidates.normal_k, usize);
+        maybe!(c.candidates.spacing_k, usize);
+        maybe!(c.candidates.min_edge_ratio, f32);
+        maybe!(c.candidates.min_sine, f32);
+        maybe!(c.candidates.min_normal_dot, f32);
+        maybe!(c.candidates.max_edge_over_spacing, f32);
+        maybe!(c.candidates.inside_plane_tol, f32);
+        maybe!(c.candidates.w_length, f32);
+        maybe!(c.candidates.w_shape, f32);
+        let pp = &mut c.postprocess;
+        maybe!(pp.support_weight, f32);
+        maybe!(pp.max_floater_faces, usize);
+        maybe!(pp.rescue.min_prob, f32);
+        maybe!(pp.hole_fill.max_hole_edges, usize);
+        maybe!(pp.hole_fill.right_angle_tol_deg, f64);
+        maybe!(pp.hole_fill.min_scaled_jacobian, f64);
+        maybe!(pp.hole_fill.min_normal_dot, f64);
+        maybe!(pp.hole_fill.snap_radius, f64);
+        maybe!(pp.close.max_loop_edges, usize);
+        maybe!(pp.close.min_scaled_jacobian, f64);
+        maybe!(pp.close.max_path_faces, usize);
+        maybe!(pp.close.seal_keep_support, f64);
+        maybe!(pp.close.seal_support_weight, f64);
+        // Sizes that bound loops of work stay small: the test is about values, not time.
+        c.candidates.per_point = c.candidates.per_point.min(64);
+        let what = format!("case {case}: {c:?}");
+        let got = std::panic::catch_unwind(|| reconstruct(&pts, model(), &c));
+        match got {
+            Err(_) => panic!("panicked: {what}"),
+            Ok(Err(_)) => err += 1,
+            Ok(Ok(m)) => {
+                ok += 1;
+                assert!(m.vertices.len() >= pts.len(), "{what}");
+                for (a, b) in pts.iter().zip(&m.vertices) {
+                    assert!(a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()), "{what}");
+                }
+                assert!(m.vertices.iter().flatten().all(|x| x.is_finite()), "non-finite vertex: {what}");
+                let he = HalfedgeMesh::from_quads(m.vertices.len(), &m.quads)
+                    .unwrap_or_else(|e| panic!("{e}: {what}"));
+                validate(&he).unwrap_or_else(|e| panic!("{e}: {what}"));
+            }
+        }
+    }
+    // Both outcomes occur, so the test exercises both paths.
+    assert!(ok > 25 && err > 5, "ok {ok}, err {err}");
 }

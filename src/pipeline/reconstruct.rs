@@ -85,8 +85,10 @@ pub struct ReconstructReport {
 ///
 /// # Errors
 /// `Error::InvalidInput` for fewer than 4 (distinct) points, non-finite coordinates
-/// (naming the point), a cloud with no extent, a threshold outside [0, 1) or a
-/// neighbour count above [`MAX_NEIGHBOURS`]; shape errors if the model does not fit.
+/// (naming the point), a cloud with no extent, a threshold outside [0, 1), a merge
+/// share outside [0, 0.5] or a neighbour count above [`MAX_NEIGHBOURS`]; shape errors
+/// if the model does not fit; `Error::Checkpoint` (path `<model K>`) when a model's
+/// probabilities are not finite.
 pub fn reconstruct(points: &[[f64; 3]], model: &Model, cfg: &ReconstructConfig) -> Result<QuadMesh> {
     reconstruct_with_report(points, model, cfg).map(|(m, _)| m)
 }
@@ -132,6 +134,9 @@ pub fn reconstruct_ensemble_with_report(
     }
     if !(cfg.threshold >= 0.0 && cfg.threshold < 1.0) {
         return Err(Error::invalid(format!("threshold {} must be in [0, 1)", cfg.threshold)));
+    }
+    if !(cfg.merge_share >= 0.0 && cfg.merge_share <= 0.5) {
+        return Err(Error::invalid(format!("merge share {} must be in [0, 0.5]", cfg.merge_share)));
     }
     // Before any work on the cloud.
     crate::pipeline::candidates::check_neighbour_counts(&cfg.candidates)?;

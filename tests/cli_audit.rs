@@ -460,3 +460,29 @@ fn an_option_given_twice_is_a_usage_error() {
     }
     assert!(!std::path::Path::new(&a).exists() && !std::path::Path::new(&b).exists());
 }
+
+/// `train --val-fraction 0` printed "validation precision 0.000 recall 0.000" every
+/// epoch, as if the model were useless; with no validation samples it now says so.
+#[test]
+fn training_without_validation_says_so() {
+    let dir = Scratch::new("audit16_noval");
+    let data = dir.p("data");
+    assert_ok(&p2q(&["dataset", "--out", &data, "--synthetic", "2", "--seed", "1"]), "dataset");
+    let out = dir.p("m.p2qm");
+    let args = [
+        "train",
+        "--data",
+        &data,
+        "--out",
+        &out,
+        "--epochs",
+        "1",
+        "--max-candidates",
+        "500",
+        "--val-fraction",
+        "0",
+    ];
+    let err = assert_ok(&p2q(&args), "train without validation");
+    assert!(err.contains("no validation samples") && !err.contains("validation precision"), "{err}");
+    assert!(std::path::Path::new(&out).exists());
+}

@@ -3,6 +3,7 @@
 //! (against a brute-force reference), far outliers, duplicate faces in the
 //! post-process, and weights that give non-finite probabilities.
 
+use point2quad::mesh::halfedge::corner_set;
 use point2quad::mesh::postprocess::{postprocess, PostprocessConfig};
 use point2quad::mesh::shapes::{self, Family};
 use point2quad::pipeline::frame::Frame;
@@ -208,15 +209,7 @@ fn repeated_faces_count_once_in_the_post_process() {
     assert_eq!(rep.duplicates, 2 * n);
     assert_eq!(got.quads.len(), want.quads.len());
     let set = |m: &point2quad::mesh::poly::QuadMesh| {
-        let mut v: Vec<[u32; 4]> = m
-            .quads
-            .iter()
-            .map(|q| {
-                let mut k = *q;
-                k.sort_unstable();
-                k
-            })
-            .collect();
+        let mut v: Vec<[u32; 4]> = m.quads.iter().map(|&q| corner_set(q)).collect();
         v.sort_unstable();
         v
     };
@@ -246,6 +239,24 @@ fn unusable_weights_are_the_models_fault() {
     bad.tensors[idx].1.data_mut()[0] = f32::NAN;
     let e = Model::from_checkpoint(&bad, name).err().expect("NaN weight refused").to_string();
     assert!(e.contains("w.p2qm") && e.contains(&bad.tensors[idx].0) && e.contains("non-finite"), "{e}");
+    // A config number that is not finite is refused too, the file named once.
+    let mut inf = ckpt.clone();
+    let text = String::from_utf8(inf.config.clone()).expect("test: config text");
+    assert!(text.contains("leaky_slope"), "{text}");
+    inf.config = text
+        .lines()
+        .map(|l| {
+            if l.trim_start().starts_with("leaky_slope") {
+                "leaky_slope = inf".to_string()
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+        .into_bytes();
+    let e = Model::from_checkpoint(&inf, name).err().expect("infinite slope refused").to_string();
+    assert!(e.starts_with("w.p2qm: bad checkpoint: config line") && e.matches("w.p2qm").count() == 1, "{e}");
     let mut neg = ckpt.clone();
     let v = neg.tensors.iter().position(|(n, _)| n.ends_with("running_var")).expect("test: a BN buffer");
     neg.tensors[v].1.data_mut()[0] = -1.0;

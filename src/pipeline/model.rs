@@ -705,7 +705,17 @@ impl Model {
     /// tensors that do not match the config (the point encoder's kernel points
     /// included).
     pub fn from_checkpoint(ckpt: &Checkpoint, name: &Path) -> Result<Model> {
-        let as_ckpt_err = |e: Error| Error::Checkpoint { path: name.to_path_buf(), msg: e.to_string() };
+        // The checkpoint error names the file once: the inner error's own path (the
+        // config parser's) and "invalid input:" prefix are dropped.
+        let as_ckpt_err = |e: Error| {
+            let msg = match e {
+                Error::Parse { line, msg, .. } if line > 0 => format!("config line {line}: {msg}"),
+                Error::Parse { msg, .. } => msg,
+                Error::InvalidInput(m) => m,
+                other => other.to_string(),
+            };
+            Error::Checkpoint { path: name.to_path_buf(), msg }
+        };
         // A diverged training run, or a damaged file whose checksum was redone, would
         // otherwise give NaN probabilities, reported against the input cloud.
         for (tname, t) in &ckpt.tensors {

@@ -373,6 +373,17 @@ pub fn train(
             loss_sum += lv;
             progress(Progress::Step { epoch: epoch + 1, step: step + 1, steps: order.len(), loss: lv });
         }
+        // Weights that left f32's range (a learning rate far too large) are a
+        // divergence too, even when this epoch's losses stayed finite: never saved.
+        for id in model.params.ids() {
+            if let Some(x) = model.params.get(id).data().iter().find(|x| !x.is_finite()) {
+                return Err(Error::invalid(format!(
+                    "training diverged: weight {} became {x} in epoch {} (nothing saved for it; try a smaller --lr)",
+                    model.params.name(id),
+                    epoch + 1
+                )));
+            }
+        }
         let val_stats = evaluate(model, val, 0.5)?;
         let report = EpochReport {
             epoch: epoch + 1,

@@ -379,12 +379,27 @@ pub fn run(argv: &[String]) -> Result<()> {
     );
     let start_epoch = resume.as_ref().map(|s| s.epoch as usize).unwrap_or(0);
     let t_train = std::time::Instant::now();
+    let no_val = va.is_empty();
     let mut progress = |p: Progress| match p {
         Progress::Step { epoch, step, steps, loss } => {
             crate::output::stderr(&format!(
                 "\repoch {epoch}/{} step {step}/{steps} loss {loss:.4}   ",
                 cfg.epochs
             ));
+        }
+        Progress::Epoch(r) if no_val => {
+            let done = r.epoch - start_epoch;
+            let per = t_train.elapsed().as_secs_f64() / done.max(1) as f64;
+            let left = per * (cfg.epochs - r.epoch) as f64;
+            say!(
+                "\repoch {}/{}: loss {:.4}, lr {:.2e}, no validation samples, {:.1}s, ~{:.0} min left",
+                r.epoch,
+                cfg.epochs,
+                r.loss,
+                r.lr,
+                r.seconds,
+                left / 60.0
+            );
         }
         Progress::Epoch(r) => {
             let done = r.epoch - start_epoch;
@@ -410,7 +425,14 @@ pub fn run(argv: &[String]) -> Result<()> {
         checkpoint::save(&out, &weights)
     };
     let reports = train(&mut model, &tr, &va, &cfg, resume, &mut progress, &mut save)?;
-    if let Some(r) = reports.last() {
+    if let (Some(_), true) = (reports.last(), no_val) {
+        say!(
+            "train: done in {:.1} min (no validation samples); weights in {}, checkpoint in {}",
+            t_train.elapsed().as_secs_f64() / 60.0,
+            out.display(),
+            ckpt_path.display()
+        );
+    } else if let Some(r) = reports.last() {
         say!(
             "train: done in {:.1} min; final validation precision {:.3} recall {:.3}; weights in {}, checkpoint in {}",
             t_train.elapsed().as_secs_f64() / 60.0,

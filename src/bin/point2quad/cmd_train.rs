@@ -387,33 +387,26 @@ pub fn run(argv: &[String]) -> Result<()> {
                 cfg.epochs
             ));
         }
-        Progress::Epoch(r) if no_val => {
-            let done = r.epoch - start_epoch;
-            let per = t_train.elapsed().as_secs_f64() / done.max(1) as f64;
-            let left = per * (cfg.epochs - r.epoch) as f64;
-            say!(
-                "\repoch {}/{}: loss {:.4}, lr {:.2e}, no validation samples, {:.1}s, ~{:.0} min left",
-                r.epoch,
-                cfg.epochs,
-                r.loss,
-                r.lr,
-                r.seconds,
-                left / 60.0
-            );
-        }
         Progress::Epoch(r) => {
             let done = r.epoch - start_epoch;
             let per = t_train.elapsed().as_secs_f64() / done.max(1) as f64;
             let left = per * (cfg.epochs - r.epoch) as f64;
+            let val = if no_val {
+                "no validation samples".to_string()
+            } else {
+                format!(
+                    "validation precision {:.3} recall {:.3} (of GT faces {:.3})",
+                    r.val.precision(),
+                    r.val.recall(),
+                    r.val.mesh_recall()
+                )
+            };
             say!(
-                "\repoch {}/{}: loss {:.4}, lr {:.2e}, validation precision {:.3} recall {:.3} (of GT faces {:.3}), {:.1}s, ~{:.0} min left",
+                "\repoch {}/{}: loss {:.4}, lr {:.2e}, {val}, {:.1}s, ~{:.0} min left",
                 r.epoch,
                 cfg.epochs,
                 r.loss,
                 r.lr,
-                r.val.precision(),
-                r.val.recall(),
-                r.val.mesh_recall(),
                 r.seconds,
                 left / 60.0
             );

@@ -216,11 +216,11 @@ pub fn reconstruct_ensemble_with_report(
             Some(r) => {
                 let p = r.apply(&model.params, &local, &cands.quads, &base)?;
                 *t_refine.get_or_insert(0.0) += clock.split();
+                check_probabilities(k, &p)?;
                 p
             }
             None => base,
         };
-        check_probabilities(k, &p)?;
         if probs.is_empty() {
             probs = p;
         } else {

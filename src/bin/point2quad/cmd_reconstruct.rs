@@ -87,16 +87,19 @@ const SPEC: Spec = Spec {
 /// binary so that it works from anywhere.
 const SHIPPED_WEIGHTS: &[u8] = include_bytes!("../../../fixtures/point2quad-default.p2qm");
 
+/// How errors name the shipped weights.
+const SHIPPED_NAME: &str = "<shipped fixtures/point2quad-default.p2qm>";
+
 /// The shipped model.
 pub fn shipped_model() -> Result<Model> {
-    Model::from_bytes(SHIPPED_WEIGHTS, Path::new("<shipped fixtures/point2quad-default.p2qm>"))
+    Model::from_bytes(SHIPPED_WEIGHTS, Path::new(SHIPPED_NAME))
 }
 
 /// `--model`'s value: one weights file, or (when no file has that name) a
-/// comma-separated list of them, an ensemble.
-fn load_models(cmd: &str, value: &str) -> Result<Vec<Model>> {
+/// comma-separated list of them, an ensemble. Each model comes with its file name.
+fn load_models(cmd: &str, value: &str) -> Result<Vec<(String, Model)>> {
     if value.is_empty() || Path::new(value).exists() || !value.contains(',') {
-        return Ok(vec![Model::load(Path::new(value))?]);
+        return Ok(vec![(value.to_string(), Model::load(Path::new(value))?)]);
     }
     let names: Vec<&str> = value.split(',').collect();
     if names.iter().any(|n| n.is_empty()) {
@@ -104,7 +107,7 @@ fn load_models(cmd: &str, value: &str) -> Result<Vec<Model>> {
             "{cmd}: --model {value}: an empty name in the list (FILE[,FILE…]; see `point2quad {cmd} --help`)"
         )));
     }
-    names.iter().map(|n| Model::load(Path::new(n))).collect()
+    names.iter().map(|n| Ok((n.to_string(), Model::load(Path::new(n))?))).collect()
 }
 
 pub fn run(argv: &[String]) -> Result<()> {
@@ -166,21 +169,16 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     let models = match a.value("--model") {
         Some(m) => load_models(cmd, m)?,
-        None => vec![shipped_model()?],
+        None => vec![(SHIPPED_NAME.to_string(), shipped_model()?)],
     };
-    let members: Vec<&Model> = models.iter().collect();
+    let members: Vec<&Model> = models.iter().map(|(_, m)| m).collect();
     // The library's refusals (too few points, no extent…) do not know the file.
-    let model_names: Vec<String> = match a.value("--model") {
-        Some(m) if models.len() > 1 => m.split(',').map(str::to_string).collect(),
-        Some(m) => vec![m.to_string()],
-        None => vec!["<shipped fixtures/point2quad-default.p2qm>".to_string()],
-    };
     let (mesh, rep) = reconstruct_ensemble_with_report(&points, &members, &cfg).map_err(|e| match e {
         Error::InvalidInput(m) => Error::invalid(format!("{}: {m}", input.display())),
         // The library names a model by its place in the ensemble; here it has a file.
         Error::Checkpoint { path, msg } => {
             let k = path.to_str().and_then(|p| p.strip_prefix("<model ")).and_then(|p| p.strip_suffix('>'));
-            let name = k.and_then(|k| k.parse::<usize>().ok()).and_then(|k| model_names.get(k));
+            let name = k.and_then(|k| k.parse::<usize>().ok()).and_then(|k| models.get(k)).map(|(n, _)| n);
             Error::Checkpoint { path: name.map_or(path, PathBuf::from), msg }
         }
         other => other,

@@ -55,12 +55,11 @@ pub fn run(argv: &[String]) -> Result<()> {
     if let Some(gt) = a.value("--gt") {
         MeshFormat::from_path(Path::new(gt))?;
         crate::output::check_output_path(Path::new(gt))?;
-        if let Some(from) = a.value("--from") {
-            crate::output::check_not_input(cmd, Path::new(gt), Path::new(from))?;
-        }
     }
     if let Some(from) = a.value("--from") {
-        crate::output::check_not_input(cmd, Path::new(out), Path::new(from))?;
+        for o in std::iter::once(out).chain(a.value("--gt")) {
+            crate::output::check_not_input(cmd, Path::new(o), Path::new(from))?;
+        }
     }
     let seed = a.parsed(cmd, "--seed", 0u64)?;
     let noise =

@@ -418,19 +418,15 @@ pub fn run(argv: &[String]) -> Result<()> {
         checkpoint::save(&out, &weights)
     };
     let reports = train(&mut model, &tr, &va, &cfg, resume, &mut progress, &mut save)?;
-    if let (Some(_), true) = (reports.last(), no_val) {
+    if let Some(r) = reports.last() {
+        let val = if no_val {
+            " (no validation samples)".to_string()
+        } else {
+            format!("; final validation precision {:.3} recall {:.3}", r.val.precision(), r.val.recall())
+        };
         say!(
-            "train: done in {:.1} min (no validation samples); weights in {}, checkpoint in {}",
+            "train: done in {:.1} min{val}; weights in {}, checkpoint in {}",
             t_train.elapsed().as_secs_f64() / 60.0,
-            out.display(),
-            ckpt_path.display()
-        );
-    } else if let Some(r) = reports.last() {
-        say!(
-            "train: done in {:.1} min; final validation precision {:.3} recall {:.3}; weights in {}, checkpoint in {}",
-            t_train.elapsed().as_secs_f64() / 60.0,
-            r.val.precision(),
-            r.val.recall(),
             out.display(),
             ckpt_path.display()
         );

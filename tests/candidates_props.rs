@@ -161,6 +161,61 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// Lattice continuation only adds: every candidate of the run without it is there
+    /// with the same rank, score, inside count and proposers; each added one has rank
+    /// `per_point` and one proposer, a new vertex set of distinct points, is convex and
+    /// counter-clockwise about its corners' normals, passes the sine and edge-ratio
+    /// filters, and runs a side of another candidate the other way (the seed it
+    /// continues). A small budget (4 per point) leaves it something to add.
+    #[test]
+    fn continuation_only_adds_valid_quads_next_to_other_candidates(cloud in wavy_strategy(), rank in 1u16..4) {
+        let pts = to_f32(&cloud);
+        let base = CandidateConfig { per_point: 4, ..CandidateConfig::default() };
+        let cfg = CandidateConfig { continue_rank: rank, ..base.clone() };
+        let (c0, c1) = (generate(&pts, &base).unwrap(), generate(&pts, &cfg).unwrap());
+        let at: std::collections::HashMap<[u32; 4], usize> =
+            c1.quads.iter().enumerate().map(|(i, q)| (*q, i)).collect();
+        for (i, q) in c0.quads.iter().enumerate() {
+            let j = *at.get(q).ok_or_else(|| TestCaseError::fail(format!("{q:?} lost")))?;
+            prop_assert_eq!((c0.rank[i], c0.score[i].to_bits(), c0.inside[i], c0.proposers[i]),
+                (c1.rank[j], c1.score[j].to_bits(), c1.inside[j], c1.proposers[j]));
+        }
+        let mut keys: Vec<[u32; 4]> = c1.quads.iter().map(key).collect();
+        keys.sort_unstable();
+        let n_keys = keys.len();
+        keys.dedup();
+        prop_assert_eq!(n_keys, keys.len(), "duplicate vertex sets");
+        let directed: std::collections::HashSet<(u32, u32)> =
+            c1.quads.iter().flat_map(|q| (0..4).map(move |e| (q[e], q[(e + 1) % 4]))).collect();
+        let c0_set: std::collections::HashSet<[u32; 4]> = c0.quads.iter().copied().collect();
+        for (j, q) in c1.quads.iter().enumerate() {
+            if c0_set.contains(q) {
+                continue;
+            }
+            prop_assert_eq!((c1.rank[j] as usize, c1.proposers[j]), (cfg.per_point, 1));
+            prop_assert!(key(q).windows(2).all(|w| w[0] != w[1]), "repeated index in {:?}", q);
+            let p = q.map(|v| f64p(pts[v as usize]));
+            let fn_ = normalize(cross(sub(p[2], p[0]), sub(p[3], p[1]))).unwrap();
+            let lens: Vec<f64> = (0..4).map(|i| norm(sub(p[(i + 1) % 4], p[i]))).collect();
+            let (lmin, lmax) = lens.iter().fold((f64::MAX, 0.0f64), |(a, b), &l| (a.min(l), b.max(l)));
+            prop_assert!(lmin >= cfg.min_edge_ratio as f64 * lmax * (1.0 - 1e-5));
+            for i in 0..4 {
+                let ci = cross(sub(p[i], p[(i + 3) % 4]), sub(p[(i + 1) % 4], p[i]));
+                prop_assert!(dot(ci, fn_) > 0.0, "corner {} of {:?} not convex", i, q);
+                prop_assert!(norm(ci) / (lens[i] * lens[(i + 3) % 4]) >= cfg.min_sine as f64 - 1e-5);
+            }
+            // Counter-clockwise about the normal of the corner that ranked it.
+            prop_assert!((0..4).any(|i| dot(f64p(c1.normals[q[i] as usize]), fn_) > 0.0),
+                "{:?} is clockwise about every corner's normal", q);
+            prop_assert!((0..4).any(|e| directed.contains(&(q[(e + 1) % 4], q[e]))),
+                "{:?} continues no candidate", q);
+        }
+    }
+}
+
 #[test]
 fn coplanar_cloud_is_an_open_surface_with_candidates() {
     let mut cloud = wavy_cloud(10, 10, 3);

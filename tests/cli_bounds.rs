@@ -53,6 +53,16 @@ fn work_sizing_options_are_bounded() {
             "--per-point must be between 1 and 1024",
             huge,
         ),
+        (
+            vec!["candidates", c, "-o", &cand, "--continue-rank", "1001"],
+            "--continue-rank must be between 0 and 1000",
+            "1001",
+        ),
+        (
+            vec!["reconstruct", c, "-o", &mesh, "--continue-rank", huge],
+            "--continue-rank must be between 0 and 1000",
+            huge,
+        ),
         (vec!["reconstruct", c, "-o", &mesh, "--k", "65"], "--k must be between 3 and 64", "65"),
         (vec!["reconstruct", c, "-o", &mesh, "--k", huge], "--k must be between 3 and 64", huge),
         (
@@ -97,4 +107,25 @@ fn work_sizing_options_are_bounded() {
             assert!(idx.len() == 4 && idx.iter().all(|&i| i < 30), "{line}");
         }
     }
+}
+
+/// `--continue-rank` adds candidates and keeps every one found without it (a budget of
+/// one per point leaves the continuation something to find on the sheet).
+#[test]
+fn continuation_adds_candidates_from_the_cli() {
+    let dir = Scratch::new("cli_continue");
+    let c = &dir.write("sheet.xyz", sheet().as_bytes());
+    let lines = |rank: &str| -> std::collections::BTreeSet<String> {
+        let cand = dir.p(&format!("c{rank}.txt"));
+        let out = p2q(&["candidates", c, "-o", &cand, "--per-point", "1", "--continue-rank", rank]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        std::fs::read_to_string(&cand)
+            .expect("test: candidates written")
+            .lines()
+            .map(str::to_string)
+            .collect()
+    };
+    let (off, on) = (lines("0"), lines("1"));
+    assert!(off.is_subset(&on), "continuation dropped candidates");
+    assert!(on.len() > off.len(), "nothing added: {} vs {}", on.len(), off.len());
 }

@@ -320,6 +320,12 @@ fn any_config_gives_a_valid_mesh_or_an_error() {
                     $field = counts[(f().to_bits() % counts.len() as u64) as usize];
                 }
             };
+            ($field:expr, u16) => {
+                if pick() {
+                    $field =
+                        counts[(f().to_bits() % counts.len() as u64) as usize].min(u16::MAX as usize) as u16;
+                }
+            };
         }
         maybe!(c.threshold, f32);
         maybe!(c.merge_share, f32);
@@ -333,6 +339,9 @@ fn any_config_gives_a_valid_mesh_or_an_error() {
         maybe!(c.candidates.inside_plane_tol, f32);
         maybe!(c.candidates.w_length, f32);
         maybe!(c.candidates.w_shape, f32);
+        maybe!(c.candidates.continue_rank, u16);
+        maybe!(c.candidates.continue_snap, f32);
+        maybe!(c.candidates.continue_steps, usize);
         let pp = &mut c.postprocess;
         maybe!(pp.support_weight, f32);
         maybe!(pp.max_floater_faces, usize);

@@ -95,6 +95,14 @@ pub struct CandidateConfig {
     pub w_length: f32,
     /// Weight of 1 − scaled Jacobian.
     pub w_shape: f32,
+    /// Lattice continuation (module header): candidates of rank below this seed it;
+    /// 0 turns it off.
+    pub continue_rank: u16,
+    /// How far the nearest point may lie from a continuation's predicted corner, as a
+    /// fraction of the seed's side that predicts it.
+    pub continue_snap: f32,
+    /// Continuation steps: the quads one step adds seed the next.
+    pub continue_steps: usize,
 }
 
 impl Default for CandidateConfig {
@@ -114,6 +122,9 @@ impl Default for CandidateConfig {
             w_inside: 1.0,
             w_length: 1.0,
             w_shape: 1.0,
+            continue_rank: 0,
+            continue_snap: 0.3,
+            continue_steps: 3,
         }
     }
 }
@@ -335,7 +346,6 @@ fn orient2(a: [f32; 2], b: [f32; 2], c: [f32; 2]) -> f32 {
     (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
 }
 
-#[cfg(test)]
 /// +1 if the 2-D polygon is strictly convex counter-clockwise, −1 clockwise, 0 otherwise.
 #[inline]
 fn convex_sign(q: [[f32; 2]; 4]) -> i32 {
@@ -899,6 +909,163 @@ fn canonical(q: [u32; 4]) -> [u32; 4] {
     [q[s], q[(s + 1) % 4], q[(s + 2) % 4], q[(s + 3) % 4]]
 }
 
+/// The per-candidate lists of [`generate`] before their final ordering.
+struct Lists<'a> {
+    quads: &'a mut Vec<[u32; 4]>,
+    proposers: &'a mut Vec<u8>,
+    rank: &'a mut Vec<u16>,
+    score: &'a mut Vec<f32>,
+    inside: &'a mut Vec<u16>,
+}
+
+/// The ranking score and inside count that the proposer `r[0]` gives the cyclic quad
+/// `r`, if its filters pass it: as [`propose`] ranks a triple of its neighbours (convex
+/// and counter-clockwise in its tangent plane; the edge-ratio, longest-edge, sine and
+/// normal filters; inside points among its `k` nearest), for any three other points.
+fn evaluate_from(
+    r: [u32; 4],
+    points: &[[f32; 3]],
+    normals: &[[f32; 3]],
+    spacing: &[f32],
+    knn: &KnnTable,
+    cfg: &CandidateConfig,
+) -> Option<(f32, u16)> {
+    let i = r[0] as usize;
+    let p = points[i];
+    let np = normals[i];
+    let q3 = r.map(|v| sub(points[v as usize], p));
+    let (tu, tv) = tangent_basis(np);
+    if convex_sign(q3.map(|v| [dot(v, tu), dot(v, tv)])) != 1 {
+        return None;
+    }
+    let g = quad_geom(q3);
+    let lmin = g.len.iter().copied().fold(f32::INFINITY, f32::min);
+    let lmax = g.len.iter().copied().fold(0.0f32, f32::max);
+    if lmin.is_nan() || lmin <= 0.0 || lmin < cfg.min_edge_ratio * lmax {
+        return None;
+    }
+    let corners_ok = (0..4).all(|c| {
+        g.sine[c] >= cfg.min_sine
+            && dot(g.corner_normal[c], np) > 0.0
+            && (0..c).all(|d| dot(g.corner_normal[d], g.corner_normal[c]) >= cfg.min_normal_dot)
+    });
+    if !corners_ok {
+        return None;
+    }
+    let sbar = r.iter().map(|&v| spacing[v as usize]).sum::<f32>() / 4.0;
+    if lmax > cfg.max_edge_over_spacing * sbar {
+        return None;
+    }
+    let lbar = (g.len[0] + g.len[1] + g.len[2] + g.len[3]) / 4.0;
+    let base = cfg.w_length * (lbar / sbar - 1.0) + cfg.w_shape * (1.0 - g.jacobian);
+    let n = points.len();
+    let rel: Vec<[f32; 3]> =
+        neighbours(knn, n, i, cfg.k).filter(|v| !r.contains(v)).map(|v| sub(points[v as usize], p)).collect();
+    let pre = Pre { quad: r, local: [0; 3], q3, normal: g.normal, len: g.len, base };
+    let inside = inside_count(&pre, &rel, cfg);
+    let score = base
+        + cfg.w_inside_first.max(0.0) * inside.min(1) as f32
+        + cfg.w_inside.max(0.0) * inside.saturating_sub(1) as f32;
+    (!score.is_nan()).then_some((score, inside))
+}
+
+/// The best (lowest) [`evaluate_from`] over the four corners of `q` as proposer.
+fn evaluate_quad(
+    q: [u32; 4],
+    points: &[[f32; 3]],
+    normals: &[[f32; 3]],
+    spacing: &[f32],
+    knn: &KnnTable,
+    cfg: &CandidateConfig,
+) -> Option<(f32, u16)> {
+    (0..4)
+        .filter_map(|x| {
+            let r = [q[x], q[(x + 1) % 4], q[(x + 2) % 4], q[(x + 3) % 4]];
+            evaluate_from(r, points, normals, spacing, knn, cfg)
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+}
+
+/// Lattice continuation (not in the paper): the quad across each side a → b of a seed
+/// (a, b, c, d) is predicted as a parallelogram, a' = a + (a − d), b' = b + (b − c);
+/// each predicted corner is snapped to its nearest point when that lies within
+/// `continue_snap` × the side that predicts it (|a − d|, |b − c|). A new vertex set
+/// that [`evaluate_quad`] passes joins the candidates with rank `per_point` (beyond
+/// every budget) and one proposer. Seeds: the candidates of rank below
+/// `continue_rank`, then for `continue_steps − 1` more steps the quads the step
+/// before added. With noise points, ranking misses true faces whose neighbours it
+/// keeps; on a lattice the neighbour predicts them.
+fn continuation(
+    points: &[[f32; 3]],
+    normals: &[[f32; 3]],
+    spacing: &[f32],
+    knn: &KnnTable,
+    cfg: &CandidateConfig,
+    lists: &mut Lists<'_>,
+) {
+    let snap = cfg.continue_snap;
+    if snap.is_nan() || snap <= 0.0 || lists.quads.is_empty() {
+        return;
+    }
+    let tree = KdTree::build(points);
+    let sorted_key = |q: &[u32; 4]| {
+        let mut k = *q;
+        k.sort_unstable();
+        k
+    };
+    let mut have: std::collections::HashSet<[u32; 4]> = lists.quads.iter().map(sorted_key).collect();
+    let mut frontier: Vec<[u32; 4]> = lists
+        .quads
+        .iter()
+        .zip(lists.rank.iter())
+        .filter(|(_, &r)| r < cfg.continue_rank)
+        .map(|(q, _)| *q)
+        .collect();
+    let rank = cfg.per_point.min(u16::MAX as usize) as u16;
+    for _ in 0..cfg.continue_steps {
+        if frontier.is_empty() {
+            break;
+        }
+        let found: Vec<Vec<([u32; 4], f32, u16)>> = crate::par::map(frontier.len(), |f| {
+            let q = frontier[f];
+            let mut out = Vec::new();
+            for e in 0..4 {
+                let (a, b, c, d) = (q[e], q[(e + 1) % 4], q[(e + 2) % 4], q[(e + 3) % 4]);
+                let [pa, pb, pc, pd] = [a, b, c, d].map(|v| points[v as usize]);
+                let ta = [2.0 * pa[0] - pd[0], 2.0 * pa[1] - pd[1], 2.0 * pa[2] - pd[2]];
+                let tb = [2.0 * pb[0] - pc[0], 2.0 * pb[1] - pc[1], 2.0 * pb[2] - pc[2]];
+                let (Some(na), Some(nb)) = (tree.nearest(ta), tree.nearest(tb)) else {
+                    continue;
+                };
+                let close = |d2: f32, side: f32| d2.sqrt() <= snap * side;
+                if !close(na.dist_sq, norm(sub(pa, pd))) || !close(nb.dist_sq, norm(sub(pb, pc))) {
+                    continue;
+                }
+                let nq = [b, a, na.index, nb.index];
+                if (0..4).any(|i| (i + 1..4).any(|j| nq[i] == nq[j])) {
+                    continue;
+                }
+                if let Some((score, inside)) = evaluate_quad(nq, points, normals, spacing, knn, cfg) {
+                    out.push((canonical(nq), score, inside));
+                }
+            }
+            out
+        });
+        let mut next = Vec::new();
+        for (q, score, inside) in found.into_iter().flatten() {
+            if have.insert(sorted_key(&q)) {
+                lists.quads.push(q);
+                lists.proposers.push(1);
+                lists.rank.push(rank);
+                lists.score.push(score);
+                lists.inside.push(inside);
+                next.push(q);
+            }
+        }
+        frontier = next;
+    }
+}
+
 /// Generates the candidate quads of a cloud (in the normalised frame, though any
 /// scale works: everything is relative to the local spacing).
 ///
@@ -963,6 +1130,16 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
         score.push(all[s].3);
         inside.push(all[s].4);
         s = e;
+    }
+    if cfg.continue_rank > 0 {
+        let mut lists = Lists {
+            quads: &mut quads,
+            proposers: &mut proposers,
+            rank: &mut rank,
+            score: &mut score,
+            inside: &mut inside,
+        };
+        continuation(points, &normals, &spacing, &knn, cfg, &mut lists);
     }
     // Final order: by canonical quad, with the per-candidate arrays alongside.
     let mut idx: Vec<usize> = (0..quads.len()).collect();
@@ -1070,6 +1247,79 @@ mod tests {
             out.truncate(cfg.per_point);
         }
         out
+    }
+
+    /// `evaluate_from` (the continuation's ranking of a quad from one corner) gives
+    /// every quad the straightforward reference proposal keeps the same score and
+    /// inside count, bit for bit, and passes nothing that fails a filter.
+    #[test]
+    fn evaluate_from_matches_the_reference_proposal() {
+        let cfg = CandidateConfig::default();
+        for (nx, ny, jitter) in [(7, 6, 0.15f32), (9, 5, 0.3), (6, 6, 0.0)] {
+            let pts = grid(nx, ny, jitter);
+            let c = generate(&pts, &cfg).unwrap();
+            let mut checked = 0;
+            for i in 0..pts.len() {
+                for k in propose_reference(i, &pts, &c, &cfg) {
+                    let got = evaluate_from(k.quad, &pts, &c.normals, &c.spacing, &c.knn, &cfg);
+                    assert_eq!(
+                        got.map(|(s, n)| (s.to_bits(), n)),
+                        Some((k.score.to_bits(), k.inside)),
+                        "{:?}",
+                        k.quad
+                    );
+                    checked += 1;
+                }
+                // A quad with a repeated corner order reversed is clockwise: refused.
+                if let Some(k) = propose_reference(i, &pts, &c, &cfg).first() {
+                    let q = k.quad;
+                    let rev = [q[0], q[3], q[2], q[1]];
+                    assert_eq!(evaluate_from(rev, &pts, &c.normals, &c.spacing, &c.knn, &cfg), None);
+                }
+            }
+            assert!(checked > pts.len(), "too few quads checked: {checked}");
+        }
+    }
+
+    /// On a jittered lattice with a budget of one candidate per point, the ranking
+    /// misses cells; continuing from the best-ranked ones finds every cell.
+    #[test]
+    fn continuation_recovers_the_cells_of_a_lattice() {
+        let (nx, ny) = (12, 9);
+        let pts = grid(nx, ny, 0.2);
+        let cells: Vec<[u32; 4]> = (0..ny - 1)
+            .flat_map(|y| (0..nx - 1).map(move |x| (x, y)))
+            .map(|(x, y)| {
+                let v = (y * nx + x) as u32;
+                let mut k = [v, v + 1, v + nx as u32, v + nx as u32 + 1];
+                k.sort_unstable();
+                k
+            })
+            .collect();
+        let covered = |cfg: &CandidateConfig| {
+            let c = generate(&pts, cfg).unwrap();
+            let have: std::collections::HashSet<[u32; 4]> = c
+                .quads
+                .iter()
+                .map(|q| {
+                    let mut k = *q;
+                    k.sort_unstable();
+                    k
+                })
+                .collect();
+            cells.iter().filter(|k| have.contains(*k)).count()
+        };
+        let base = CandidateConfig { per_point: 1, ..CandidateConfig::default() };
+        let before = covered(&base);
+        assert!(before < cells.len(), "the small budget should miss cells ({before})");
+        let after = covered(&CandidateConfig { continue_rank: 1, continue_steps: 30, ..base.clone() });
+        assert_eq!(after, cells.len(), "{before} cells without continuation");
+        // Off when the snap tolerance is not positive.
+        assert_eq!(
+            covered(&CandidateConfig { continue_rank: 1, continue_snap: 0.0, ..base.clone() }),
+            before
+        );
+        assert_eq!(covered(&CandidateConfig { continue_rank: 1, continue_snap: f32::NAN, ..base }), before);
     }
 
     #[test]

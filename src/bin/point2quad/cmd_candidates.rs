@@ -11,7 +11,7 @@ pub const HELP: &str = "\
 point2quad candidates: candidate quads of a point cloud (from the points alone)
 
 USAGE:
-    point2quad candidates INPUT -o CAND.txt [--k K] [--per-point P]
+    point2quad candidates INPUT -o CAND.txt [--k K] [--per-point P] [--continue-rank R]
 
 ARGS:
     INPUT            points: .xyz/.txt/.pts/.csv (x y z columns), .ply, .obj (v lines), .off
@@ -23,6 +23,10 @@ OPTIONS:
     --k K            neighbours searched per point (default 20; 3 to 64)
     --per-point P    candidates kept per proposing point before de-duplication
                      (default 32; 1 to 1024)
+    --continue-rank R
+                     lattice continuation: candidates ranked below R propose the
+                     quads across their sides, snapped to the nearest points
+                     (default as `reconstruct`; 0 turns it off; 0 to 1000)
     -h, --help       this text
 
 A summary (points, candidates, candidates per point, time) goes to stderr.
@@ -45,7 +49,7 @@ pub const MAX_PER_POINT: usize = 1024;
 /// `InvalidInput` for clouds that cannot give candidates (fewer than 4 points, NaN).
 pub fn run(argv: &[String]) -> Result<()> {
     const CMD: &str = "candidates";
-    let spec = Spec { valued: &["-o", "--output", "--k", "--per-point"], switches: &[] };
+    let spec = Spec { valued: &["-o", "--output", "--k", "--per-point", "--continue-rank"], switches: &[] };
     let args = Args::parse(CMD, argv, &spec)?;
     let input = &args.expect_positional(CMD, 1, "one INPUT file")?[0];
     let output = match args.value("-o").or(args.value("--output")) {
@@ -64,6 +68,14 @@ pub fn run(argv: &[String]) -> Result<()> {
         MAX_PER_POINT,
         "more keeps every candidate anyway",
     )?;
+    cfg.continue_rank = args.parsed_in(
+        CMD,
+        "--continue-rank",
+        cfg.continue_rank as usize,
+        0,
+        1000,
+        "a rank among a point's candidates",
+    )? as u16;
     let t0 = std::time::Instant::now();
     let points = point2quad::io::points::read_points(std::path::Path::new(input))?;
     let t_read = t0.elapsed();

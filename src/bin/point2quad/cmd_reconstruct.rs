@@ -36,6 +36,9 @@ OPTIONS:
                           (may be non-manifold: the paper's raw output)
     --threshold T         probability above which a candidate is kept [0.5]
     --k K                 neighbours searched per point for candidates, 3 to 64 [20]
+    --continue-rank R     lattice continuation: candidates ranked below R (0 to 1000)
+                          propose the quads across their sides, snapped to the
+                          nearest points (0 turns it off) [0]
     --max-floater-faces N remove open components of at most N faces after insertion
                           (floaters; 0 keeps them) [4]
     --rescue-min-prob P   at holes, candidates scored under the threshold but at least P
@@ -69,6 +72,7 @@ const SPEC: Spec = Spec {
         "--svg",
         "--threshold",
         "--k",
+        "--continue-rank",
         "--max-floater-faces",
         "--rescue-min-prob",
         "--merge-share",
@@ -127,6 +131,14 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     cfg.candidates.k =
         a.parsed_in(cmd, "--k", cfg.candidates.k, 3, MAX_K, "work grows with the cube of k")?;
+    cfg.candidates.continue_rank = a.parsed_in(
+        cmd,
+        "--continue-rank",
+        cfg.candidates.continue_rank as usize,
+        0,
+        1000,
+        "a rank among a point's candidates",
+    )? as u16;
     let pp = &mut cfg.postprocess;
     pp.max_floater_faces = a.parsed(cmd, "--max-floater-faces", pp.max_floater_faces)?;
     pp.rescue.min_prob =

@@ -15,7 +15,8 @@
 //! ```
 //!
 //! `sweep` reads CandidateConfig overrides from DK, DPP, DR, DS, DWI1, DWI, DWL, DWS,
-//! DSN (min sine), DND (min normal dot), DNK (normal k), DSK (spacing k); DM limits it
+//! DSN (min sine), DND (min normal dot), DNK (normal k), DSK (spacing k), DCR / DCS / DCI
+//! (the continuation's rank, snap tolerance and steps); DM limits it
 //! to the meshes whose name contains it.
 //! `losses` splits the ground-truth faces of each mesh (10% noise) into: not a
 //! candidate, candidate under the threshold, over it but dropped by the post-process,
@@ -198,6 +199,9 @@ fn cfg_from_env() -> CandidateConfig {
     cfg.min_normal_dot = envf("DND", cfg.min_normal_dot as f64) as f32;
     cfg.normal_k = envf("DNK", cfg.normal_k as f64) as usize;
     cfg.spacing_k = envf("DSK", cfg.spacing_k as f64) as usize;
+    cfg.continue_rank = envf("DCR", cfg.continue_rank as f64) as u16;
+    cfg.continue_snap = envf("DCS", cfg.continue_snap as f64) as f32;
+    cfg.continue_steps = envf("DCI", cfg.continue_steps as f64) as usize;
     cfg
 }
 

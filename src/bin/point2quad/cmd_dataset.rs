@@ -53,6 +53,8 @@ OPTIONS:
     --offset F        largest noise offset along the face normal, as a fraction of
                       the face's mean edge length (default 0.1; at most 100)
     --seed S          random seed (default 0); the same seed gives the same files
+    --continue-rank R lattice continuation in the candidates, as `reconstruct
+                      --continue-rank` (0 turns it off; 0 to 1000) [as reconstruct]
 
 At least one of --synthetic and --meshes is needed. A mesh that cannot be read, is
 not pure-quad or has no faces is skipped with a warning naming it; the run fails if a
@@ -133,6 +135,7 @@ pub fn run(argv: &[String]) -> Result<()> {
             "--noise",
             "--offset",
             "--seed",
+            "--continue-rank",
             "--coarsen",
             "--stretch",
         ],
@@ -156,6 +159,15 @@ pub fn run(argv: &[String]) -> Result<()> {
         "about a second of work and a file per sample",
     )?;
     let seed: u64 = args.parsed(CMD, "--seed", 0)?;
+    let mut cand_cfg = CandidateConfig::default();
+    cand_cfg.continue_rank = args.parsed_in(
+        CMD,
+        "--continue-rank",
+        cand_cfg.continue_rank as usize,
+        0,
+        1000,
+        "a rank among a point's candidates",
+    )? as u16;
     let coarsen = copy_values(&args, CMD, "--coarsen", |f| {
         if f > 0.0 && f < 1.0 {
             Ok(())
@@ -243,7 +255,6 @@ pub fn run(argv: &[String]) -> Result<()> {
         }
     }
     std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
-    let cand_cfg = CandidateConfig::default();
     let total = jobs.len();
     let done = AtomicUsize::new(0);
     let results: Vec<Result<Option<String>>> = par::map(total, |k| {

@@ -884,3 +884,28 @@ fn train_kp_spacing_cells_reaches_the_model_and_is_checked() {
 fn argv(v: &[String]) -> Vec<&str> {
     v.iter().map(String::as_str).collect()
 }
+
+/// Points scattered at random over a sphere (no quad layout) give a sparse result and
+/// a warning that says why; the vertices of a quad sphere give neither. The warning
+/// counts points that are corners of a face, so it must not fire on the quad sphere.
+#[test]
+fn reconstruct_warns_when_most_points_are_no_faces_corner() {
+    let s = Scratch::new("cli_scatter");
+    let mut rng = point2quad::rng::Rng::new(1);
+    let mut text = String::new();
+    for _ in 0..3000 {
+        let z = 2.0 * rng.f64() - 1.0;
+        let t = std::f64::consts::TAU * rng.f64();
+        let r = (1.0 - z * z).sqrt();
+        text.push_str(&format!("{} {} {z}\n", r * t.cos(), r * t.sin()));
+    }
+    let scattered = s.write("scattered.xyz", text.as_bytes());
+    let err =
+        String::from_utf8_lossy(&ok(&["reconstruct", &scattered, "-o", &s.p("a.obj")]).stderr).to_string();
+    assert!(err.contains("warning") && err.contains("points are corners of a face"), "{err}");
+    assert!(err.contains("scattered.xyz"), "{err}");
+    let quad = s.p("quad.xyz");
+    ok(&["synth", "--shape", "cube_sphere", "--seed", "1", "--noise", "0", "-o", &quad]);
+    let err = String::from_utf8_lossy(&ok(&["reconstruct", &quad, "-o", &s.p("b.obj")]).stderr).to_string();
+    assert!(!err.contains("warning"), "{err}");
+}

@@ -259,6 +259,27 @@ pub fn run(argv: &[String]) -> Result<()> {
             rep.predicted
         ));
     }
+    // A raw scan (points scattered at random, no quad layout) gives a sparse result
+    // without any error: say so when most usable points are no face's corner.
+    let usable = rep.points.saturating_sub(rep.duplicates + rep.outliers);
+    let mut used = vec![false; points.len()];
+    for q in &mesh.quads {
+        for &v in q {
+            if let Some(u) = used.get_mut(v as usize) {
+                *u = true;
+            }
+        }
+    }
+    let corners = used.iter().filter(|&&u| u).count();
+    if rep.faces > 0 && 2 * corners < usable {
+        crate::output::stderr(&format!(
+            "reconstruct: warning: {}: only {corners} of {usable} points are corners of a face, so most of \
+             the surface was not found; if the points are not the vertices of a quad mesh (a raw scan), \
+             resample them first: the method picks faces among the input points (README, \"What the \
+             input must be\")\n",
+            input.display()
+        ));
+    }
     crate::output::stderr(&format!(
         "reconstruct: time: {} (total {:.0} ms)\n",
         stages.join(", "),

@@ -739,19 +739,25 @@ fn keep(out: &mut Vec<Kept>, points: &[[f32; 3]], k: Kept, per_point: usize) {
     out.truncate(per_point);
 }
 
+/// The full ranking score: the base score plus the inside term (module header).
+#[inline]
+fn with_inside(base: f32, inside: u16, cfg: &CandidateConfig) -> f32 {
+    base + cfg.w_inside_first.max(0.0) * inside.min(1) as f32
+        + cfg.w_inside.max(0.0) * inside.saturating_sub(1) as f32
+}
+
 /// The kept list from all filter survivors sorted by base score. The inside count
 /// only adds to the score (its weights are ≥ 0), so candidates are visited by base
 /// score and the count is computed only while it can still make the budget.
 fn select_sorted(loc: &Local<'_>, points: &[[f32; 3]], pre: &mut [Pre], out: &mut Vec<Kept>) {
     let cfg = loc.cfg;
     pre.sort_unstable_by(|x, y| x.base.total_cmp(&y.base));
-    let (w_first, w_more) = (cfg.w_inside_first.max(0.0), cfg.w_inside.max(0.0));
     for c in pre.iter() {
         if out.len() >= cfg.per_point && c.base > out[out.len() - 1].score {
             break;
         }
         let inside = inside_count(c, loc.rel, cfg);
-        let score = c.base + w_first * inside.min(1) as f32 + w_more * inside.saturating_sub(1) as f32;
+        let score = with_inside(c.base, inside, cfg);
         if out.len() >= cfg.per_point && score > out[out.len() - 1].score {
             continue;
         }
@@ -776,7 +782,6 @@ fn select_lazy(
     out: &mut Vec<Kept>,
 ) {
     let cfg = loc.cfg;
-    let (w_first, w_more) = (cfg.w_inside_first.max(0.0), cfg.w_inside.max(0.0));
     keys.clear();
     keys.extend(ordered.iter().enumerate().map(|(j, o)| key_bits(o.length_term) << 32 | j as u64));
     // Usually only the best few hundred bounds are visited: sort those first and the
@@ -823,7 +828,7 @@ fn select_lazy(
                 break;
             }
             let inside = inside_count(c, loc.rel, cfg);
-            let score = c.base + w_first * inside.min(1) as f32 + w_more * inside.saturating_sub(1) as f32;
+            let score = with_inside(c.base, inside, cfg);
             if full && score > out[out.len() - 1].score {
                 continue;
             }
@@ -903,6 +908,13 @@ pub fn check_neighbour_counts(cfg: &CandidateConfig) -> Result<()> {
     Ok(())
 }
 
+/// A quad's vertex set as a sorted array (the de-duplication key).
+fn vertex_set(q: &[u32; 4]) -> [u32; 4] {
+    let mut k = *q;
+    k.sort_unstable();
+    k
+}
+
 /// Rotates a cyclic quad so its smallest index comes first (direction kept).
 fn canonical(q: [u32; 4]) -> [u32; 4] {
     let s = (0..4).min_by_key(|&i| q[i]).expect("internal error: 4 corners");
@@ -918,102 +930,87 @@ struct Lists<'a> {
     inside: &'a mut Vec<u16>,
 }
 
-/// The ranking score and inside count that the proposer `r[0]` gives the cyclic quad
-/// `r`, if its filters pass it: as [`propose`] ranks a triple of its neighbours (convex
-/// and counter-clockwise in its tangent plane; the edge-ratio, longest-edge, sine and
-/// normal filters; inside points among its `k` nearest), for any three other points.
-fn evaluate_from(
-    r: [u32; 4],
-    points: &[[f32; 3]],
-    normals: &[[f32; 3]],
-    spacing: &[f32],
-    knn: &KnnTable,
-    cfg: &CandidateConfig,
-) -> Option<(f32, u16)> {
-    let i = r[0] as usize;
-    let p = points[i];
-    let np = normals[i];
-    let q3 = r.map(|v| sub(points[v as usize], p));
-    let (tu, tv) = tangent_basis(np);
-    if convex_sign(q3.map(|v| [dot(v, tu), dot(v, tv)])) != 1 {
-        return None;
-    }
-    let g = quad_geom(q3);
-    let lmin = g.len.iter().copied().fold(f32::INFINITY, f32::min);
-    let lmax = g.len.iter().copied().fold(0.0f32, f32::max);
-    if lmin.is_nan() || lmin <= 0.0 || lmin < cfg.min_edge_ratio * lmax {
-        return None;
-    }
-    let corners_ok = (0..4).all(|c| {
-        g.sine[c] >= cfg.min_sine
-            && dot(g.corner_normal[c], np) > 0.0
-            && (0..c).all(|d| dot(g.corner_normal[d], g.corner_normal[c]) >= cfg.min_normal_dot)
-    });
-    if !corners_ok {
-        return None;
-    }
-    let sbar = r.iter().map(|&v| spacing[v as usize]).sum::<f32>() / 4.0;
-    if lmax > cfg.max_edge_over_spacing * sbar {
-        return None;
-    }
-    let lbar = (g.len[0] + g.len[1] + g.len[2] + g.len[3]) / 4.0;
-    let base = cfg.w_length * (lbar / sbar - 1.0) + cfg.w_shape * (1.0 - g.jacobian);
-    let n = points.len();
-    let rel: Vec<[f32; 3]> =
-        neighbours(knn, n, i, cfg.k).filter(|v| !r.contains(v)).map(|v| sub(points[v as usize], p)).collect();
-    let pre = Pre { quad: r, local: [0; 3], q3, normal: g.normal, len: g.len, base };
-    let inside = inside_count(&pre, &rel, cfg);
-    let score = base
-        + cfg.w_inside_first.max(0.0) * inside.min(1) as f32
-        + cfg.w_inside.max(0.0) * inside.saturating_sub(1) as f32;
-    (!score.is_nan()).then_some((score, inside))
+/// What ranking a quad needs: the cloud, its normals, spacing and kNN table, and the
+/// thresholds.
+struct Cloud<'a> {
+    points: &'a [[f32; 3]],
+    normals: &'a [[f32; 3]],
+    spacing: &'a [f32],
+    knn: &'a KnnTable,
+    cfg: &'a CandidateConfig,
 }
 
-/// The best (lowest) [`evaluate_from`] over the four corners of `q` as proposer.
-fn evaluate_quad(
-    q: [u32; 4],
-    points: &[[f32; 3]],
-    normals: &[[f32; 3]],
-    spacing: &[f32],
-    knn: &KnnTable,
-    cfg: &CandidateConfig,
-) -> Option<(f32, u16)> {
-    (0..4)
-        .filter_map(|x| {
-            let r = [q[x], q[(x + 1) % 4], q[(x + 2) % 4], q[(x + 3) % 4]];
-            evaluate_from(r, points, normals, spacing, knn, cfg)
-        })
-        .min_by(|a, b| a.0.total_cmp(&b.0))
+impl Cloud<'_> {
+    /// The ranking score and inside count that the proposer `r[0]` gives the cyclic
+    /// quad `r`, if its filters pass it: as [`propose`] ranks a triple of its neighbours
+    /// (convex and counter-clockwise in its tangent plane; the edge-ratio, longest-edge,
+    /// sine and normal filters; inside points among its `k` nearest), for any three
+    /// other points.
+    fn evaluate_from(&self, r: [u32; 4]) -> Option<(f32, u16)> {
+        let (points, cfg) = (self.points, self.cfg);
+        let i = r[0] as usize;
+        let p = points[i];
+        let np = self.normals[i];
+        let q3 = r.map(|v| sub(points[v as usize], p));
+        let (tu, tv) = tangent_basis(np);
+        if convex_sign(q3.map(|v| [dot(v, tu), dot(v, tv)])) != 1 {
+            return None;
+        }
+        let g = quad_geom(q3);
+        let lmin = g.len.iter().copied().fold(f32::INFINITY, f32::min);
+        let lmax = g.len.iter().copied().fold(0.0f32, f32::max);
+        if lmin.is_nan() || lmin <= 0.0 || lmin < cfg.min_edge_ratio * lmax {
+            return None;
+        }
+        let corners_ok = (0..4).all(|c| {
+            g.sine[c] >= cfg.min_sine
+                && dot(g.corner_normal[c], np) > 0.0
+                && (0..c).all(|d| dot(g.corner_normal[d], g.corner_normal[c]) >= cfg.min_normal_dot)
+        });
+        if !corners_ok {
+            return None;
+        }
+        let sbar = r.iter().map(|&v| self.spacing[v as usize]).sum::<f32>() / 4.0;
+        if lmax > cfg.max_edge_over_spacing * sbar {
+            return None;
+        }
+        let lbar = (g.len[0] + g.len[1] + g.len[2] + g.len[3]) / 4.0;
+        let base = cfg.w_length * (lbar / sbar - 1.0) + cfg.w_shape * (1.0 - g.jacobian);
+        let rel: Vec<[f32; 3]> = neighbours(self.knn, points.len(), i, cfg.k)
+            .filter(|v| !r.contains(v))
+            .map(|v| sub(points[v as usize], p))
+            .collect();
+        let pre = Pre { quad: r, local: [0; 3], q3, normal: g.normal, len: g.len, base };
+        let inside = inside_count(&pre, &rel, cfg);
+        let score = with_inside(base, inside, cfg);
+        (!score.is_nan()).then_some((score, inside))
+    }
+
+    /// The best (lowest) [`Cloud::evaluate_from`] over the four corners of `q` as proposer.
+    fn evaluate_quad(&self, q: [u32; 4]) -> Option<(f32, u16)> {
+        (0..4)
+            .filter_map(|x| self.evaluate_from([q[x], q[(x + 1) % 4], q[(x + 2) % 4], q[(x + 3) % 4]]))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+    }
 }
 
 /// Lattice continuation (not in the paper): the quad across each side a → b of a seed
 /// (a, b, c, d) is predicted as a parallelogram, a' = a + (a − d), b' = b + (b − c);
 /// each predicted corner is snapped to its nearest point when that lies within
 /// `continue_snap` × the side that predicts it (|a − d|, |b − c|). A new vertex set
-/// that [`evaluate_quad`] passes joins the candidates with rank `per_point` (beyond
+/// that [`Cloud::evaluate_quad`] passes joins the candidates with rank `per_point` (beyond
 /// every budget) and one proposer. Seeds: the candidates of rank below
 /// `continue_rank`, then for `continue_steps − 1` more steps the quads the step
 /// before added. With noise points, ranking misses true faces whose neighbours it
 /// keeps; on a lattice the neighbour predicts them.
-fn continuation(
-    points: &[[f32; 3]],
-    normals: &[[f32; 3]],
-    spacing: &[f32],
-    knn: &KnnTable,
-    cfg: &CandidateConfig,
-    lists: &mut Lists<'_>,
-) {
+fn continuation(cloud: &Cloud<'_>, lists: &mut Lists<'_>) {
+    let (points, cfg) = (cloud.points, cloud.cfg);
     let snap = cfg.continue_snap;
     if snap.is_nan() || snap <= 0.0 || lists.quads.is_empty() {
         return;
     }
     let tree = KdTree::build(points);
-    let sorted_key = |q: &[u32; 4]| {
-        let mut k = *q;
-        k.sort_unstable();
-        k
-    };
-    let mut have: std::collections::HashSet<[u32; 4]> = lists.quads.iter().map(sorted_key).collect();
+    let mut have: std::collections::HashSet<[u32; 4]> = lists.quads.iter().map(vertex_set).collect();
     let mut frontier: Vec<[u32; 4]> = lists
         .quads
         .iter()
@@ -1045,7 +1042,7 @@ fn continuation(
                 if (0..4).any(|i| (i + 1..4).any(|j| nq[i] == nq[j])) {
                     continue;
                 }
-                if let Some((score, inside)) = evaluate_quad(nq, points, normals, spacing, knn, cfg) {
+                if let Some((score, inside)) = cloud.evaluate_quad(nq) {
                     out.push((canonical(nq), score, inside));
                 }
             }
@@ -1053,7 +1050,7 @@ fn continuation(
         });
         let mut next = Vec::new();
         for (q, score, inside) in found.into_iter().flatten() {
-            if have.insert(sorted_key(&q)) {
+            if have.insert(vertex_set(&q)) {
                 lists.quads.push(q);
                 lists.proposers.push(1);
                 lists.rank.push(rank);
@@ -1096,9 +1093,13 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
         for i in ch * CHUNK..((ch + 1) * CHUNK).min(n) {
             propose(i, points, &normals, &spacing, &knn, cfg, &mut sc);
             for (r, kp) in sc.out.iter().enumerate() {
-                let mut key = kp.quad;
-                key.sort_unstable();
-                entries.push((key, canonical(kp.quad), r.min(u16::MAX as usize) as u16, kp.score, kp.inside));
+                entries.push((
+                    vertex_set(&kp.quad),
+                    canonical(kp.quad),
+                    r.min(u16::MAX as usize) as u16,
+                    kp.score,
+                    kp.inside,
+                ));
             }
         }
         entries
@@ -1139,7 +1140,8 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
             score: &mut score,
             inside: &mut inside,
         };
-        continuation(points, &normals, &spacing, &knn, cfg, &mut lists);
+        let cloud = Cloud { points, normals: &normals, spacing: &spacing, knn: &knn, cfg };
+        continuation(&cloud, &mut lists);
     }
     // Final order: by canonical quad, with the per-candidate arrays alongside.
     let mut idx: Vec<usize> = (0..quads.len()).collect();
@@ -1258,10 +1260,12 @@ mod tests {
         for (nx, ny, jitter) in [(7, 6, 0.15f32), (9, 5, 0.3), (6, 6, 0.0)] {
             let pts = grid(nx, ny, jitter);
             let c = generate(&pts, &cfg).unwrap();
+            let cloud =
+                Cloud { points: &pts, normals: &c.normals, spacing: &c.spacing, knn: &c.knn, cfg: &cfg };
             let mut checked = 0;
             for i in 0..pts.len() {
                 for k in propose_reference(i, &pts, &c, &cfg) {
-                    let got = evaluate_from(k.quad, &pts, &c.normals, &c.spacing, &c.knn, &cfg);
+                    let got = cloud.evaluate_from(k.quad);
                     assert_eq!(
                         got.map(|(s, n)| (s.to_bits(), n)),
                         Some((k.score.to_bits(), k.inside)),
@@ -1274,7 +1278,7 @@ mod tests {
                 if let Some(k) = propose_reference(i, &pts, &c, &cfg).first() {
                     let q = k.quad;
                     let rev = [q[0], q[3], q[2], q[1]];
-                    assert_eq!(evaluate_from(rev, &pts, &c.normals, &c.spacing, &c.knn, &cfg), None);
+                    assert_eq!(cloud.evaluate_from(rev), None);
                 }
             }
             assert!(checked > pts.len(), "too few quads checked: {checked}");
@@ -1291,22 +1295,12 @@ mod tests {
             .flat_map(|y| (0..nx - 1).map(move |x| (x, y)))
             .map(|(x, y)| {
                 let v = (y * nx + x) as u32;
-                let mut k = [v, v + 1, v + nx as u32, v + nx as u32 + 1];
-                k.sort_unstable();
-                k
+                vertex_set(&[v, v + 1, v + nx as u32, v + nx as u32 + 1])
             })
             .collect();
         let covered = |cfg: &CandidateConfig| {
             let c = generate(&pts, cfg).unwrap();
-            let have: std::collections::HashSet<[u32; 4]> = c
-                .quads
-                .iter()
-                .map(|q| {
-                    let mut k = *q;
-                    k.sort_unstable();
-                    k
-                })
-                .collect();
+            let have: std::collections::HashSet<[u32; 4]> = c.quads.iter().map(vertex_set).collect();
             cells.iter().filter(|k| have.contains(*k)).count()
         };
         let base = CandidateConfig { per_point: 1, ..CandidateConfig::default() };
@@ -1377,15 +1371,7 @@ mod tests {
         let (nx, ny) = (12, 9);
         let pts = grid(nx, ny, 0.1);
         let c = generate(&pts, &CandidateConfig::default()).unwrap();
-        let mut keys: Vec<[u32; 4]> = c
-            .quads
-            .iter()
-            .map(|q| {
-                let mut k = *q;
-                k.sort_unstable();
-                k
-            })
-            .collect();
+        let mut keys: Vec<[u32; 4]> = c.quads.iter().map(vertex_set).collect();
         keys.sort_unstable();
         for y in 0..ny - 1 {
             for x in 0..nx - 1 {

@@ -104,7 +104,8 @@ proptest! {
             prop_assert!(lmin >= cfg.min_edge_ratio as f64 * lmax * (1.0 - 1e-5));
             let crow = &ctx[ci * CONTEXT_DIM..(ci + 1) * CONTEXT_DIM];
             prop_assert!(crow[5] >= 1.0 && crow[5] <= 4.0);
-            prop_assert!((crow[4] as usize) < cfg.per_point);
+            // Rank `per_point` only for the lattice continuation's quads (one proposer).
+            prop_assert!((crow[4] as usize) < cfg.per_point || (crow[4] as usize == cfg.per_point && crow[5] == 1.0));
             for i in 0..4 {
                 let s = 0.5 * (c.spacing[q[i] as usize] + c.spacing[q[(i + 1) % 4] as usize]) as f64;
                 prop_assert!((crow[6 + i] as f64 - lens[i] / s).abs() < 1e-4 * (1.0 + lens[i] / s));
@@ -173,7 +174,7 @@ proptest! {
     #[test]
     fn continuation_only_adds_valid_quads_next_to_other_candidates(cloud in wavy_strategy(), rank in 1u16..4) {
         let pts = to_f32(&cloud);
-        let base = CandidateConfig { per_point: 4, ..CandidateConfig::default() };
+        let base = CandidateConfig { per_point: 4, continue_rank: 0, ..CandidateConfig::default() };
         let cfg = CandidateConfig { continue_rank: rank, ..base.clone() };
         let (c0, c1) = (generate(&pts, &base).unwrap(), generate(&pts, &cfg).unwrap());
         let at: std::collections::HashMap<[u32; 4], usize> =

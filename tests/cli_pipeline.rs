@@ -449,15 +449,21 @@ fn valid_mesh_metric(mesh: &str, key: &str) -> f64 {
 fn reconstruct_closing_options() {
     let s = Scratch::new("close");
     let cloud = s.p("cloud.xyz");
-    ok(&["synth", "--shape", "random", "-o", &cloud, "--noise", "0.1", "--seed", "5"]);
     let border = |mesh: &str| valid_mesh_metric(mesh, "boundary_edges");
     let (full, plain) = (s.p("full.obj"), s.p("plain.obj"));
+    // The first of a few seeds whose reconstruction without the closing steps has holes
+    // (which ones do depends on the shipped weights).
+    let has_holes = |seed: &str| {
+        ok(&["synth", "--shape", "random", "-o", &cloud, "--noise", "0.1", "--seed", seed]);
+        ok(&["reconstruct", &cloud, "-o", &plain, "--no-rescue", "--no-close", "--max-floater-faces", "0"]);
+        border(&plain) > 0.0
+    };
+    let seeds = ["5", "1", "2", "3", "4", "6", "7", "8", "9", "10", "11", "12"];
+    assert!(seeds.iter().any(|seed| has_holes(seed)), "no case with holes among seeds {seeds:?}");
     let out = ok(&["reconstruct", &cloud, "-o", &full]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("rescued") && err.contains("loops closed") && err.contains("floater"), "{err}");
-    ok(&["reconstruct", &cloud, "-o", &plain, "--no-rescue", "--no-close", "--max-floater-faces", "0"]);
     let (b_full, b_plain) = (border(&full), border(&plain));
-    assert!(b_plain > 0.0, "the case must have holes");
     assert!(b_full <= b_plain, "{b_full} > {b_plain}");
     // Untangling re-splits faces over the same vertices: same border, worst shape no worse.
     assert!(err.contains("badly shaped faces re-split"), "{err}");
@@ -487,18 +493,25 @@ fn reconstruct_closing_options() {
 fn reconstruct_inverted_fills_and_seal_switches() {
     let s = Scratch::new("inverted");
     let cloud = s.p("cloud.xyz");
-    ok(&["synth", "--shape", "random", "-o", &cloud, "--noise", "0.1", "--seed", "4"]);
     let metrics =
         |mesh: &str| (valid_mesh_metric(mesh, "inverted_quads"), valid_mesh_metric(mesh, "boundary_edges"));
     let (full, no_inv, no_seal) = (s.p("full.obj"), s.p("no_inv.obj"), s.p("no_seal.obj"));
-    let out = ok(&["reconstruct", &cloud, "-o", &full]);
-    let err = String::from_utf8_lossy(&out.stderr);
+    // The first of a few seeds whose default reconstruction has an inverted quad (which
+    // ones do depends on the shipped weights).
+    let inverted = |seed: &str| {
+        ok(&["synth", "--shape", "random", "-o", &cloud, "--noise", "0.1", "--seed", seed]);
+        let out = ok(&["reconstruct", &cloud, "-o", &full]);
+        (metrics(&full).0 > 0.0).then(|| String::from_utf8_lossy(&out.stderr).to_string())
+    };
+    let seeds = ["4", "1", "2", "3", "5", "6", "7", "8", "9", "10", "11", "12"];
+    let err = seeds.iter().find_map(|seed| inverted(seed));
+    let err = err.unwrap_or_else(|| panic!("no case with inverted fills among seeds {seeds:?}"));
     assert!(err.contains("loops sealed"), "{err}");
     ok(&["reconstruct", &cloud, "-o", &no_inv, "--no-inverted-fills"]);
     ok(&["reconstruct", &cloud, "-o", &no_seal, "--no-seal"]);
     let ((inv_full, b_full), (inv_no, b_no), (_, b_no_seal)) =
         (metrics(&full), metrics(&no_inv), metrics(&no_seal));
-    assert!(inv_full > 0.0, "the case must have inverted fills");
+    assert!(inv_full > 0.0);
     assert_eq!(inv_no, 0.0);
     assert!(b_no >= b_full, "{b_no} < {b_full}");
     assert!(b_no_seal >= b_full, "{b_no_seal} < {b_full}");

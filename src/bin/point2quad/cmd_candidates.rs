@@ -26,7 +26,7 @@ OPTIONS:
     --continue-rank R
                      lattice continuation: candidates ranked below R propose the
                      quads across their sides, snapped to the nearest points
-                     (default as `reconstruct`; 0 turns it off; 0 to 1000)
+                     (default 2, as `reconstruct`; 0 turns it off; 0 to 1000)
     -h, --help       this text
 
 A summary (points, candidates, candidates per point, time) goes to stderr.

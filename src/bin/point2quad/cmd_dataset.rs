@@ -54,7 +54,7 @@ OPTIONS:
                       the face's mean edge length (default 0.1; at most 100)
     --seed S          random seed (default 0); the same seed gives the same files
     --continue-rank R lattice continuation in the candidates, as `reconstruct
-                      --continue-rank` (0 turns it off; 0 to 1000) [as reconstruct]
+                      --continue-rank` (0 turns it off; 0 to 1000) [2]
 
 At least one of --synthetic and --meshes is needed. A mesh that cannot be read, is
 not pure-quad or has no faces is skipped with a warning naming it; the run fails if a

@@ -38,7 +38,7 @@ OPTIONS:
     --k K                 neighbours searched per point for candidates, 3 to 64 [20]
     --continue-rank R     lattice continuation: candidates ranked below R (0 to 1000)
                           propose the quads across their sides, snapped to the
-                          nearest points (0 turns it off) [0]
+                          nearest points (0 turns it off) [2]
     --max-floater-faces N remove open components of at most N faces after insertion
                           (floaters; 0 keeps them) [4]
     --rescue-min-prob P   at holes, candidates scored under the threshold but at least P

@@ -931,15 +931,6 @@ fn canonical(q: [u32; 4]) -> [u32; 4] {
     [q[s], q[(s + 1) % 4], q[(s + 2) % 4], q[(s + 3) % 4]]
 }
 
-/// The per-candidate lists of [`generate`] before their final ordering.
-struct Lists<'a> {
-    quads: &'a mut Vec<[u32; 4]>,
-    proposers: &'a mut Vec<u8>,
-    rank: &'a mut Vec<u16>,
-    score: &'a mut Vec<f32>,
-    inside: &'a mut Vec<u16>,
-}
-
 /// What ranking a quad needs: the cloud, its normals, spacing and kNN table, and the
 /// thresholds.
 struct Cloud<'a> {
@@ -1012,23 +1003,19 @@ impl Cloud<'_> {
 /// every budget) and one proposer. Seeds: the candidates of rank below
 /// `continue_rank`, then for `continue_steps − 1` more steps the quads the step
 /// before added. With noise points, ranking misses true faces whose neighbours it
-/// keeps; on a lattice the neighbour predicts them.
-fn continuation(cloud: &Cloud<'_>, lists: &mut Lists<'_>) {
+/// keeps; on a lattice the neighbour predicts them. Returns the added quads (canonical
+/// cyclic order) with their score and inside count, in the order found.
+fn continuation(cloud: &Cloud<'_>, quads: &[[u32; 4]], rank: &[u16]) -> Vec<([u32; 4], f32, u16)> {
     let (points, cfg) = (cloud.points, cloud.cfg);
     let snap = cfg.continue_snap;
-    if snap.is_nan() || snap <= 0.0 || lists.quads.is_empty() {
-        return;
+    let mut added = Vec::new();
+    if snap.is_nan() || snap <= 0.0 || quads.is_empty() {
+        return added;
     }
     let tree = KdTree::build(points);
-    let mut have: std::collections::HashSet<[u32; 4]> = lists.quads.iter().map(vertex_set).collect();
-    let mut frontier: Vec<[u32; 4]> = lists
-        .quads
-        .iter()
-        .zip(lists.rank.iter())
-        .filter(|(_, &r)| r < cfg.continue_rank)
-        .map(|(q, _)| *q)
-        .collect();
-    let rank = cfg.per_point.min(u16::MAX as usize) as u16;
+    let mut have: std::collections::HashSet<[u32; 4]> = quads.iter().map(vertex_set).collect();
+    let mut frontier: Vec<[u32; 4]> =
+        quads.iter().zip(rank).filter(|(_, &r)| r < cfg.continue_rank).map(|(q, _)| *q).collect();
     for _ in 0..cfg.continue_steps {
         if frontier.is_empty() {
             break;
@@ -1058,19 +1045,11 @@ fn continuation(cloud: &Cloud<'_>, lists: &mut Lists<'_>) {
             }
             out
         });
-        let mut next = Vec::new();
-        for (q, score, inside) in found.into_iter().flatten() {
-            if have.insert(vertex_set(&q)) {
-                lists.quads.push(q);
-                lists.proposers.push(1);
-                lists.rank.push(rank);
-                lists.score.push(score);
-                lists.inside.push(inside);
-                next.push(q);
-            }
-        }
-        frontier = next;
+        let step_start = added.len();
+        added.extend(found.into_iter().flatten().filter(|(q, _, _)| have.insert(vertex_set(q))));
+        frontier = added[step_start..].iter().map(|(q, _, _)| *q).collect();
     }
+    added
 }
 
 /// Generates the candidate quads of a cloud (in the normalised frame, though any
@@ -1143,15 +1122,16 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
         s = e;
     }
     if cfg.continue_rank > 0 {
-        let mut lists = Lists {
-            quads: &mut quads,
-            proposers: &mut proposers,
-            rank: &mut rank,
-            score: &mut score,
-            inside: &mut inside,
-        };
         let cloud = Cloud { points, normals: &normals, spacing: &spacing, knn: &knn, cfg };
-        continuation(&cloud, &mut lists);
+        // Beyond every proposer's budget, proposed by none of the corners' lists.
+        let beyond = cfg.per_point.min(u16::MAX as usize) as u16;
+        for (q, sc, ins) in continuation(&cloud, &quads, &rank) {
+            quads.push(q);
+            proposers.push(1);
+            rank.push(beyond);
+            score.push(sc);
+            inside.push(ins);
+        }
     }
     // Final order: by canonical quad, with the per-candidate arrays alongside.
     let mut idx: Vec<usize> = (0..quads.len()).collect();

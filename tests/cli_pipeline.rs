@@ -399,6 +399,31 @@ fn refine_trains_rounds_that_reconstruct_reads() {
     assert_eq!(m.config().refine_rounds, 2);
     assert_eq!(m.config().refine_widths, vec![4]);
     assert_eq!(m.config().refine_sides, point2quad::pipeline::refine::SideRule::Normals);
+    // The flow columns by default (session 18); `--features base` gives the older input.
+    assert_eq!(m.config().refine_input, point2quad::pipeline::refine::RefineInput::Flow);
+    let base_refined = s.p("rb.p2qm");
+    ok(&[
+        "refine",
+        "--data",
+        &data,
+        "--model",
+        &model,
+        "--out",
+        &base_refined,
+        "--rounds",
+        "1",
+        "--widths",
+        "4",
+        "--epochs",
+        "1",
+        "--val-fraction",
+        "0.5",
+        "--features",
+        "base",
+    ]);
+    let mb = point2quad::pipeline::model::Model::load(Path::new(&base_refined)).unwrap();
+    assert_eq!(mb.config().refine_input, point2quad::pipeline::refine::RefineInput::Base);
+    assert!(!mb.config().to_text().contains("refine_input"), "{}", mb.config().to_text());
     let cloud = s.p("cloud.xyz");
     ok(&["synth", "--from", &s.p("meshes/b_torus.obj"), "-o", &cloud, "--seed", "2"]);
     let mesh = s.p("out.obj");
@@ -418,12 +443,38 @@ fn refine_trains_rounds_that_reconstruct_reads() {
         ("--lr", "nan"),
         ("--val-fraction", "1"),
         ("--sides", "left"),
+        ("--features", "lattice"),
     ] {
         let err = fails(&["refine", "--data", &data, "--model", &model, "--out", &never, opt, val], 2);
         assert!(err.contains(opt), "{opt} {val}: {err}");
     }
     let err = fails(&["refine", "--data", &data, "--out", &never], 2);
     assert!(err.contains("--model"), "{err}");
+    // The flow columns need the normals rule's neighbours.
+    let err =
+        fails(&["refine", "--data", &data, "--model", &model, "--out", &never, "--sides", "direction"], 2);
+    assert!(err.contains("--features flow") && err.contains("--sides normals"), "{err}");
+    ok(&[
+        "refine",
+        "--data",
+        &data,
+        "--model",
+        &model,
+        "--out",
+        &base_refined,
+        "--rounds",
+        "1",
+        "--widths",
+        "4",
+        "--epochs",
+        "1",
+        "--val-fraction",
+        "0.5",
+        "--features",
+        "base",
+        "--sides",
+        "direction",
+    ]);
     let err = fails(&["refine", "--data", &data, "--model", &s.p("missing.p2qm"), "--out", &never], 1);
     assert!(err.contains("missing.p2qm"), "{err}");
     let err = fails(&["refine", "--data", &s.p("nowhere"), "--model", &model, "--out", &never], 1);

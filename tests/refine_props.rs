@@ -11,7 +11,8 @@ use point2quad::pipeline::candidates::CandidateConfig;
 use point2quad::pipeline::dataset::build_sample;
 use point2quad::pipeline::model::{Model, ModelConfig};
 use point2quad::pipeline::refine::{
-    refine_features, score_stats, train_refiner, RefineSample, RefineTrainConfig, SideRule, REFINE_DIM,
+    refine_features, refine_features_with, score_stats, train_refiner, RefineInput, RefineSample,
+    RefineTrainConfig, SideRule, FLOW_DIM, REFINE_DIM,
 };
 use point2quad::pipeline::train::sample_input;
 use point2quad::rng::Rng;
@@ -47,7 +48,38 @@ fn normal_cos(points: &[[f32; 3]], a: &[u32; 4], b: &[u32; 4]) -> f64 {
     }
 }
 
-/// The features of candidate `c`, from the definitions in `refine_features`' doc.
+fn sub64(a: [f32; 3], b: [f32; 3]) -> [f64; 3] {
+    [a[0] as f64 - b[0] as f64, a[1] as f64 - b[1] as f64, a[2] as f64 - b[2] as f64]
+}
+
+fn len64(v: [f64; 3]) -> f64 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+/// `refine_features_with`'s flow of neighbour `d` across edge i of `q` (f64): the
+/// smaller cosine of the two lattice lines continued at the edge's ends, and
+/// ln(mean edge of d / mean edge of q).
+fn flow64(pts: &[[f32; 3]], q: &[u32; 4], i: usize, d: &[u32; 4]) -> (f64, f64) {
+    let (a, b) = (q[i], q[(i + 1) % 4]);
+    // d's corner next to v other than w.
+    let other = |v: u32, w: u32| {
+        let j = d.iter().position(|&x| x == v).unwrap();
+        if d[(j + 1) % 4] == w {
+            d[(j + 3) % 4]
+        } else {
+            d[(j + 1) % 4]
+        }
+    };
+    let p = |v: u32| pts[v as usize];
+    let cos = |u: [f64; 3], v: [f64; 3]| (u[0] * v[0] + u[1] * v[1] + u[2] * v[2]) / (len64(u) * len64(v));
+    let sa = cos(sub64(p(a), p(q[(i + 3) % 4])), sub64(p(other(a, b)), p(a)));
+    let sb = cos(sub64(p(b), p(q[(i + 2) % 4])), sub64(p(other(b, a)), p(b)));
+    let mean = |r: &[u32; 4]| (0..4).map(|k| len64(sub64(p(r[(k + 1) % 4]), p(r[k])))).sum::<f64>() / 4.0;
+    (sa.min(sb), (mean(d) / mean(q)).ln())
+}
+
+/// The features of candidate `c`, from the definitions in `refine_features`' doc
+/// (and, with `flow`, the flow columns of `refine_features_with`'s doc).
 /// Sides: `None` = by direction; `Some(points)` = a candidate running the edge the same
 /// way is a rival and one running it the other way a neighbour, swapped when the two
 /// normals are more than 120° apart (`None` is returned when a normal pair sits within
@@ -58,8 +90,11 @@ fn reference_row(
     p: &[f32],
     base: &[f32],
     c: usize,
+    flow: bool,
 ) -> Option<Vec<f32>> {
     let q = quads[c];
+    let mut flow_s = [0.0f32; 4];
+    let mut flow_r = [0.0f32; 4];
     let has_directed = |d: &[u32; 4], a: u32, b: u32| (0..4).any(|i| d[i] == a && d[(i + 1) % 4] == b);
     let has_both = |d: &[u32; 4], a: u32, b: u32| d.contains(&a) && d.contains(&b);
     let best = |f: &dyn Fn(&[u32; 4]) -> bool, skip_self: bool| -> f32 {
@@ -102,6 +137,33 @@ fn reference_row(
                         across[i] = across[i].max(p[d]);
                     }
                 }
+                if flow {
+                    // Among the equally best neighbours across edge i, the one whose
+                    // cyclic order started at its smallest corner is smallest.
+                    let start_min = |r: &[u32; 4]| {
+                        let s = (0..4).min_by_key(|&k| r[k]).unwrap();
+                        [r[s], r[(s + 1) % 4], r[(s + 2) % 4], r[(s + 3) % 4]]
+                    };
+                    let mut chosen: Option<[u32; 4]> = None;
+                    for (d, qd) in quads.iter().enumerate() {
+                        let (fw, bw) = (has_directed(qd, a, b), has_directed(qd, b, a));
+                        if d == c || !(fw || bw) {
+                            continue;
+                        }
+                        let opp = normal_cos(pts, &q, qd) <= -0.5;
+                        if ((bw && !opp) || (fw && opp)) && p[d] == across[i] {
+                            let k = start_min(qd);
+                            if chosen.is_none_or(|o| k < o) {
+                                chosen = Some(k);
+                            }
+                        }
+                    }
+                    if let Some(k) = chosen {
+                        let (s, r) = flow64(pts, &q, i, &k);
+                        flow_s[i] = across[i] * s as f32;
+                        flow_r[i] = across[i] * r.abs() as f32;
+                    }
+                }
             }
         }
         shared[i] = best(&|d| has_both(d, a, b), true);
@@ -127,6 +189,10 @@ fn reference_row(
     row.extend(sorted(hi));
     row.extend(sorted(shared));
     row.push(logit(base[c]));
+    if flow {
+        row.extend(sorted(flow_s));
+        row.extend(sorted(flow_r));
+    }
     Some(row)
 }
 
@@ -161,13 +227,33 @@ proptest! {
             prop_assert_eq!(f.len(), quads.len() * REFINE_DIM);
             let sides = (rule == SideRule::Normals).then_some(&pts[..]);
             for c in 0..quads.len() {
-                let Some(want) = reference_row(&quads, sides, &p, &base, c) else { continue };
+                let Some(want) = reference_row(&quads, sides, &p, &base, c, false) else { continue };
                 let got = &f[c * REFINE_DIM..(c + 1) * REFINE_DIM];
                 for (j, (g, w)) in got.iter().zip(&want).enumerate() {
                     // Columns 14–17 are sums (another order of additions); the rest are exact.
                     let tol = if (14..18).contains(&j) { 1e-5 } else { 0.0 };
                     prop_assert!((g - w).abs() <= tol, "{:?} candidate {} column {}: {} vs {}", rule, c, j, g, w);
                 }
+            }
+        }
+    }
+
+    /// The flow columns (and the 27 before them) equal the reference on the same sets.
+    #[test]
+    fn flow_features_equal_the_brute_force_reference((pts, quads, p, base) in candidate_sets()) {
+        let f = refine_features_with(&quads, &pts, SideRule::Normals, RefineInput::Flow, &p, &base).unwrap();
+        prop_assert_eq!(f.len(), quads.len() * FLOW_DIM);
+        let plain = refine_features(&quads, &pts, SideRule::Normals, &p, &base).unwrap();
+        for c in 0..quads.len() {
+            // The first 27 columns are exactly those of the base input.
+            prop_assert_eq!(&f[c * FLOW_DIM..c * FLOW_DIM + REFINE_DIM], &plain[c * REFINE_DIM..(c + 1) * REFINE_DIM]);
+            let Some(want) = reference_row(&quads, Some(&pts[..]), &p, &base, c, true) else { continue };
+            prop_assert_eq!(want.len(), FLOW_DIM);
+            let got = &f[c * FLOW_DIM..(c + 1) * FLOW_DIM];
+            for j in REFINE_DIM..FLOW_DIM {
+                // f32 against f64 arithmetic.
+                let tol = 1e-4 * (1.0 + want[j].abs());
+                prop_assert!((got[j] - want[j]).abs() <= tol, "candidate {} column {}: {} vs {}", c, j, got[j], want[j]);
             }
         }
     }
@@ -209,27 +295,67 @@ proptest! {
     fn features_ignore_list_order_and_cyclic_start(
         (pts, quads, p, base) in candidate_sets(), seed in any::<u64>()
     ) {
-        for rule in [SideRule::Direction, SideRule::Normals] {
-        let f = refine_features(&quads, &pts, rule, &p, &base).unwrap();
-        let mut rng = Rng::new(seed);
-        let mut perm: Vec<usize> = (0..quads.len()).collect();
-        rng.shuffle(&mut perm);
-        // Candidate perm[i] goes to slot i, its cyclic order started at another corner.
-        let q2: Vec<[u32; 4]> = perm.iter().map(|&c| {
-            let s = rng.below(4);
-            let q = quads[c];
-            [q[s], q[(s + 1) % 4], q[(s + 2) % 4], q[(s + 3) % 4]]
-        }).collect();
-        let p2: Vec<f32> = perm.iter().map(|&c| p[c]).collect();
-        let b2: Vec<f32> = perm.iter().map(|&c| base[c]).collect();
-        let f2 = refine_features(&q2, &pts, rule, &p2, &b2).unwrap();
-        for (i, &c) in perm.iter().enumerate() {
-            let (a, b) = (&f[c * REFINE_DIM..(c + 1) * REFINE_DIM], &f2[i * REFINE_DIM..(i + 1) * REFINE_DIM]);
-            for (j, (x, y)) in a.iter().zip(b).enumerate() {
-                let tol = if (14..18).contains(&j) { 1e-5 } else { 0.0 };
-                prop_assert!((x - y).abs() <= tol, "{:?} candidate {} column {}: {} vs {}", rule, c, j, x, y);
+        for (rule, input) in [
+            (SideRule::Direction, RefineInput::Base),
+            (SideRule::Normals, RefineInput::Base),
+            (SideRule::Normals, RefineInput::Flow),
+        ] {
+            let dim = input.dim();
+            let f = refine_features_with(&quads, &pts, rule, input, &p, &base).unwrap();
+            let mut rng = Rng::new(seed);
+            let mut perm: Vec<usize> = (0..quads.len()).collect();
+            rng.shuffle(&mut perm);
+            // Candidate perm[i] goes to slot i, its cyclic order started at another corner.
+            let q2: Vec<[u32; 4]> = perm.iter().map(|&c| {
+                let s = rng.below(4);
+                let q = quads[c];
+                [q[s], q[(s + 1) % 4], q[(s + 2) % 4], q[(s + 3) % 4]]
+            }).collect();
+            let p2: Vec<f32> = perm.iter().map(|&c| p[c]).collect();
+            let b2: Vec<f32> = perm.iter().map(|&c| base[c]).collect();
+            let f2 = refine_features_with(&q2, &pts, rule, input, &p2, &b2).unwrap();
+            for (i, &c) in perm.iter().enumerate() {
+                let (a, b) = (&f[c * dim..(c + 1) * dim], &f2[i * dim..(i + 1) * dim]);
+                for (j, (x, y)) in a.iter().zip(b).enumerate() {
+                    // Sums in another order: the corner masses and the mean edge lengths.
+                    let tol = if (14..18).contains(&j) || j >= REFINE_DIM { 1e-5 } else { 0.0 };
+                    prop_assert!((x - y).abs() <= tol, "{:?} {:?} candidate {} column {}: {} vs {}", rule, input, c, j, x, y);
+                }
             }
         }
+    }
+
+    /// The flow columns do not change when the points are rotated, moved and scaled
+    /// (cosines and length ratios), where no pair of normals sits near the 120° at
+    /// which the normals rule turns a neighbour into a rival.
+    #[test]
+    fn flow_features_are_similarity_invariant(
+        (pts, quads, p, base) in candidate_sets(),
+        angles in [0.0f64..6.3, 0.0f64..6.3, 0.0f64..6.3],
+        scale in 0.01f64..100.0,
+        shift in [-50.0f64..50.0, -50.0f64..50.0, -50.0f64..50.0],
+    ) {
+        let (ca, sa, cb, sb, cc, sc) =
+            (angles[0].cos(), angles[0].sin(), angles[1].cos(), angles[1].sin(), angles[2].cos(), angles[2].sin());
+        let moved: Vec<[f32; 3]> = pts.iter().map(|v| {
+            let v = v.map(|x| x as f64);
+            let v = [ca * v[0] - sa * v[1], sa * v[0] + ca * v[1], v[2]];
+            let v = [cb * v[0] + sb * v[2], v[1], -sb * v[0] + cb * v[2]];
+            let v = [v[0], cc * v[1] - sc * v[2], sc * v[1] + cc * v[2]];
+            [0, 1, 2].map(|k| (scale * v[k] + shift[k]) as f32)
+        }).collect();
+        let f = refine_features_with(&quads, &pts, SideRule::Normals, RefineInput::Flow, &p, &base).unwrap();
+        let g = refine_features_with(&quads, &moved, SideRule::Normals, RefineInput::Flow, &p, &base).unwrap();
+        for c in 0..quads.len() {
+            if reference_row(&quads, Some(&pts[..]), &p, &base, c, true).is_none()
+                || quads.iter().any(|d| (normal_cos(&pts, &quads[c], d) + 0.5).abs() < 1e-3)
+            {
+                continue;
+            }
+            for j in REFINE_DIM..FLOW_DIM {
+                let (x, y) = (f[c * FLOW_DIM + j], g[c * FLOW_DIM + j]);
+                prop_assert!((x - y).abs() <= 1e-3 * (1.0 + x.abs()), "candidate {} column {}: {} vs {}", c, j, x, y);
+            }
         }
     }
 }
@@ -306,10 +432,30 @@ fn refined_model_keeps_the_classifier_and_round_trips() {
         ("refine_rounds = two\n", "number"),
         ("refine_rounds = 1\nrefine_rounds = 1\n", "repeated"),
         ("refine_rounds = 1\nrefine_widths = 8\nrefine_sides = left\n", "direction or normals"),
+        (
+            "refine_rounds = 1\nrefine_widths = 8\nrefine_sides = normals\nrefine_input = lattice\n",
+            "base or flow",
+        ),
+        ("refine_rounds = 1\nrefine_widths = 8\nrefine_input = flow\n", "needs refine_sides = normals"),
     ] {
         let err = ModelConfig::from_text(&format!("{plain}{extra}"), Path::new("cfg")).unwrap_err();
         assert!(err.to_string().contains(why), "{extra:?}: {err}");
     }
+    // Rounds that read the flow columns: their own config line, a round trip, other
+    // probabilities than the base input's rounds from the same seed; not with the
+    // direction rule.
+    let flow = base.with_refinement_reading(2, &[8, 8], SideRule::Normals, RefineInput::Flow, 5).unwrap();
+    assert_eq!(flow.refiner().unwrap().input, RefineInput::Flow);
+    let ftext = flow.config().to_text();
+    assert!(ftext.contains("refine_input = flow"), "{ftext}");
+    assert!(!text.contains("refine_input"), "{text}");
+    assert_eq!(&ModelConfig::from_text(&ftext, Path::new("cfg")).unwrap(), flow.config());
+    assert_eq!(flow.predict_base(&s.points, &s.candidates, &x).unwrap(), want);
+    let fgot = flow.predict_with_points(&s.points, &s.candidates, &x).unwrap();
+    assert_ne!(fgot, got, "the flow columns changed nothing");
+    let fback = Model::from_bytes(&flow.to_checkpoint(None).to_bytes(), Path::new("mem")).unwrap();
+    assert_eq!(fback.predict_with_points(&s.points, &s.candidates, &x).unwrap(), fgot);
+    assert!(base.with_refinement_reading(1, &[8], SideRule::Direction, RefineInput::Flow, 0).is_err());
     // Bad settings.
     assert!(base.with_refinement(9, &[8], SideRule::Normals, 0).is_err());
     assert!(base.with_refinement(1, &[0], SideRule::Normals, 0).is_err());

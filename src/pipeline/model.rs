@@ -21,7 +21,7 @@ use crate::nn::checkpoint::{self, Checkpoint, TrainState};
 use crate::nn::conv1d::{Conv1d, ConvBnAct};
 use crate::nn::kpfcnn::{prepare, BlockKind, InputFeatures, Kpfcnn, KpfcnnConfig};
 use crate::nn::module::{Module, ResidualBlock};
-use crate::pipeline::refine::{Refiner, SideRule};
+use crate::pipeline::refine::{RefineInput, Refiner, SideRule};
 use crate::rng::Rng;
 use crate::spatial::neighborhoods::NeighborCap;
 use crate::tensor::{Act, Graph, ParamStore, Tensor, Var};
@@ -72,6 +72,9 @@ pub struct ModelConfig {
     /// file, written only for [`SideRule::Normals`]; files without it are
     /// [`SideRule::Direction`], the rule before session 8).
     pub refine_sides: SideRule,
+    /// What the refinement rounds read (`refine_input` in the text form; absent =
+    /// [`RefineInput::Base`], which every model refined before session 18 has).
+    pub refine_input: RefineInput,
 }
 
 impl ModelConfig {
@@ -93,6 +96,7 @@ impl ModelConfig {
             refine_rounds: 0,
             refine_widths: Vec::new(),
             refine_sides: SideRule::Direction,
+            refine_input: RefineInput::Base,
         }
     }
 
@@ -115,6 +119,7 @@ impl ModelConfig {
             refine_rounds: 0,
             refine_widths: Vec::new(),
             refine_sides: SideRule::Direction,
+            refine_input: RefineInput::Base,
         }
     }
 
@@ -179,6 +184,9 @@ impl ModelConfig {
                 self.refine_rounds
             )));
         }
+        if self.refine_input == RefineInput::Flow && self.refine_sides != SideRule::Normals {
+            return Err(Error::invalid("model config: refine_input = flow needs refine_sides = normals"));
+        }
         match (&self.point_encoder, self.point_dim) {
             (None, 0) => Ok(()),
             (None, d) => Err(Error::invalid(format!("model config: point_dim {d} but no point encoder"))),
@@ -221,6 +229,9 @@ impl ModelConfig {
             );
             if self.refine_sides != SideRule::Direction {
                 t += &format!("refine_sides = {}\n", self.refine_sides.name());
+            }
+            if self.refine_input != RefineInput::Base {
+                t += &format!("refine_input = {}\n", self.refine_input.name());
             }
         }
         if let Some(k) = &self.point_encoder {
@@ -318,6 +329,10 @@ impl ModelConfig {
                 "refine_sides" => {
                     c.refine_sides = SideRule::from_name(v)
                         .ok_or_else(|| bad("refine_sides must be direction or normals"))?;
+                }
+                "refine_input" => {
+                    c.refine_input =
+                        RefineInput::from_name(v).ok_or_else(|| bad("refine_input must be base or flow"))?;
                     optional_seen += 1;
                 }
                 _ if k.starts_with("kp_") => {
@@ -491,6 +506,7 @@ impl Model {
                 config.refine_rounds,
                 &config.refine_widths,
                 config.refine_sides,
+                config.refine_input,
                 &mut rng,
             )?)
         } else {
@@ -604,10 +620,27 @@ impl Model {
         sides: SideRule,
         seed: u64,
     ) -> Result<Model> {
+        self.with_refinement_reading(rounds, widths, sides, RefineInput::Base, seed)
+    }
+
+    /// As [`Model::with_refinement`], with rounds that read `input`.
+    ///
+    /// # Errors
+    /// As [`Model::with_refinement`]; `InvalidInput` for [`RefineInput::Flow`] with
+    /// [`SideRule::Direction`].
+    pub fn with_refinement_reading(
+        &self,
+        rounds: usize,
+        widths: &[usize],
+        sides: SideRule,
+        input: RefineInput,
+        seed: u64,
+    ) -> Result<Model> {
         let config = ModelConfig {
             refine_rounds: rounds,
             refine_widths: widths.to_vec(),
             refine_sides: sides,
+            refine_input: input,
             ..self.net.config.clone()
         };
         let mut out = Model::new(config, seed)?;
@@ -1049,8 +1082,8 @@ mod tests {
     }
 
     /// The shipped weights (the `default` preset reading normals without their signs,
-    /// plus 3 refinement rounds of widths 32, 32 reading sides by normals) load, and
-    /// re-serialise to the very same bytes.
+    /// plus 3 refinement rounds of widths 32, 32 reading sides by normals and the flow
+    /// columns) load, and re-serialise to the very same bytes.
     #[test]
     fn shipped_weights_load_and_reserialise_bit_exactly() {
         let bytes = include_bytes!("../../fixtures/point2quad-default.p2qm");
@@ -1059,6 +1092,7 @@ mod tests {
             refine_rounds: 3,
             refine_widths: vec![32, 32],
             refine_sides: SideRule::Normals,
+            refine_input: RefineInput::Flow,
             sign_free_normals: true,
             ..ModelConfig::default_preset()
         };

@@ -34,7 +34,52 @@ use crate::tensor::{Grads, Graph, ParamId, ParamKind, ParamStore, Tensor, Var};
 use crate::{Error, Result};
 
 /// Values per candidate read by a refinement round ([`refine_features`]).
+/// Values per candidate read by a refinement round of [`RefineInput::Base`]
+/// ([`refine_features`]).
 pub const REFINE_DIM: usize = 27;
+
+/// Values per candidate read by a round of [`RefineInput::Flow`]: [`REFINE_DIM`] and
+/// the 8 flow columns.
+pub const FLOW_DIM: usize = REFINE_DIM + 8;
+
+/// What a refinement round reads, fixed when the rounds are trained (`refine_input` in
+/// a model's config; models refined before session 18 have `Base`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RefineInput {
+    /// The probability columns of [`refine_features`] ([`REFINE_DIM`]).
+    Base,
+    /// Those and, per edge, how the best neighbour across it continues the candidate's
+    /// lattice ([`FLOW_DIM`]; [`refine_features_with`] documents the columns). Needs
+    /// [`SideRule::Normals`].
+    Flow,
+}
+
+impl RefineInput {
+    /// Columns per candidate.
+    pub fn dim(self) -> usize {
+        match self {
+            RefineInput::Base => REFINE_DIM,
+            RefineInput::Flow => FLOW_DIM,
+        }
+    }
+
+    /// `base` / `flow`, as model files and `refine --features` spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            RefineInput::Base => "base",
+            RefineInput::Flow => "flow",
+        }
+    }
+
+    /// Inverse of [`RefineInput::name`].
+    pub fn from_name(s: &str) -> Option<RefineInput> {
+        match s {
+            "base" => Some(RefineInput::Base),
+            "flow" => Some(RefineInput::Flow),
+            _ => None,
+        }
+    }
+}
 
 /// Probabilities are clamped to `[EPS, 1 − EPS]` before taking logits.
 const EPS: f32 = 1e-6;
@@ -52,6 +97,10 @@ fn logit(p: f32) -> f32 {
 pub struct CandidateGraph {
     quads: Vec<[u32; 4]>,
     n_points: usize,
+    /// What [`CandidateGraph::features`] computes.
+    input: RefineInput,
+    /// The positions, kept for [`RefineInput::Flow`] (empty otherwise).
+    pts: Vec<[f32; 3]>,
     /// Unordered pairs; slot `6·c + j` is pair j of candidate c (edges 0–3, then the
     /// diagonals (q0, q2), (q1, q3)).
     pairs: Groups,
@@ -209,6 +258,13 @@ fn best_other(best: &[(f32, u32, f32)], g: u32, me: u32) -> f32 {
     }
 }
 
+/// `q`'s cyclic order started at its smallest corner (the form `candidates::generate`
+/// lists and sorts candidates by).
+fn rotated_to_min(q: [u32; 4]) -> [u32; 4] {
+    let s = (0..4).min_by_key(|&i| q[i]).unwrap_or(0);
+    [q[s], q[(s + 1) % 4], q[(s + 2) % 4], q[(s + 3) % 4]]
+}
+
 fn sorted4(mut v: [f32; 4]) -> [f32; 4] {
     v.sort_unstable_by(f32::total_cmp);
     v
@@ -222,6 +278,24 @@ impl CandidateGraph {
     /// `InvalidInput` naming the first candidate with a corner `>= points.len()` or a
     /// repeated corner, or for more than 2^29 candidates.
     pub fn new(quads: &[[u32; 4]], points: &[[f32; 3]], rule: SideRule) -> Result<CandidateGraph> {
+        CandidateGraph::with_input(quads, points, rule, RefineInput::Base)
+    }
+
+    /// As [`CandidateGraph::new`], for rounds that read `input`.
+    ///
+    /// # Errors
+    /// As [`CandidateGraph::new`]; `InvalidInput` for [`RefineInput::Flow`] with
+    /// [`SideRule::Direction`] (the flow columns need each neighbour's identity, which
+    /// only the normals rule scans for).
+    pub fn with_input(
+        quads: &[[u32; 4]],
+        points: &[[f32; 3]],
+        rule: SideRule,
+        input: RefineInput,
+    ) -> Result<CandidateGraph> {
+        if input == RefineInput::Flow && rule != SideRule::Normals {
+            return Err(Error::invalid("refinement input flow needs sides read by normals"));
+        }
         let n_points = points.len();
         crate::pipeline::model::check_corners(quads, n_points)?;
         if let Some(c) = quads.iter().position(|q| (0..4).any(|i| (i + 1..4).any(|j| q[i] == q[j]))) {
@@ -260,17 +334,18 @@ impl CandidateGraph {
                 Groups::new(n_points, &pairs, 6),
             ),
         };
-        Ok(CandidateGraph { quads: quads.to_vec(), n_points, pairs, sides })
+        let pts = if input == RefineInput::Flow { points.to_vec() } else { Vec::new() };
+        Ok(CandidateGraph { quads: quads.to_vec(), n_points, input, pts, pairs, sides })
     }
 
     /// Under [`SideRule::Normals`]: the best rival and the best neighbour of candidate
-    /// `c` on its edge `i`, scanning the other candidates that hold that pair of points
+    /// `c` on its edge `i` (and that neighbour; `NONE` when there is none), scanning the other candidates that hold that pair of points
     /// as an edge.
-    fn sides_by_normals(&self, nrm: &[[f32; 3]], probs: &[f32], c: usize, i: usize) -> (f32, f32) {
+    fn sides_by_normals(&self, nrm: &[[f32; 3]], probs: &[f32], c: usize, i: usize) -> (f32, f32, u32) {
         let q = self.quads[c];
         let (a, b) = (q[i], q[(i + 1) % 4]);
         let g = self.pairs.of_slot[6 * c + i] as usize;
-        let (mut rival, mut across) = (0.0f32, 0.0f32);
+        let (mut rival, mut across, mut across_id) = (0.0f32, 0.0f32, NONE);
         for &d in &self.pairs.members[self.pairs.start[g] as usize..self.pairs.start[g + 1] as usize] {
             if d as usize == c {
                 continue;
@@ -284,10 +359,68 @@ impl CandidateGraph {
                 rival = rival.max(pd);
             }
             if (bwd && !opp) || (fwd && opp) {
-                across = across.max(pd);
+                // Among equally probable neighbours the flow columns take the one whose
+                // cyclic order, started at its smallest corner, is smallest: the first
+                // of them in `candidates::generate`'s order, and independent of the
+                // order of the list.
+                let better = across_id == NONE
+                    || pd > across
+                    || (pd == across && rotated_to_min(qd) < rotated_to_min(self.quads[across_id as usize]));
+                if better {
+                    across = pd;
+                    across_id = d;
+                }
             }
         }
-        (rival, across)
+        (rival, across, across_id)
+    }
+
+    /// How neighbour `d` continues candidate `c` across c's edge i = (a, b): at a, the
+    /// cosine between c's side arriving at a (q_{i−1} → a) and d's other side leaving a;
+    /// the same at b (q_{i+2} → b); the smaller of the two (1: both lattice lines go
+    /// straight on), and ln(mean edge of d / mean edge of c). (0, 0) when d does not
+    /// hold (a, b) as an edge or a length is zero.
+    fn flow(&self, c: usize, i: usize, d: u32) -> (f32, f32) {
+        let p = |v: u32| self.pts[v as usize];
+        let q = self.quads[c];
+        let qd = self.quads[d as usize];
+        let (a, b) = (q[i], q[(i + 1) % 4]);
+        let other = |v: u32, w: u32| -> Option<u32> {
+            let j = qd.iter().position(|&x| x == v)?;
+            let (n1, n2) = (qd[(j + 1) % 4], qd[(j + 3) % 4]);
+            if n1 == w {
+                Some(n2)
+            } else if n2 == w {
+                Some(n1)
+            } else {
+                None
+            }
+        };
+        let sub = |x: [f32; 3], y: [f32; 3]| [x[0] - y[0], x[1] - y[1], x[2] - y[2]];
+        let cosv = |u: [f32; 3], v: [f32; 3]| {
+            let l = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()
+                * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            if l > 0.0 {
+                (u[0] * v[0] + u[1] * v[1] + u[2] * v[2]) / l
+            } else {
+                0.0
+            }
+        };
+        let (Some(x), Some(y)) = (other(a, b), other(b, a)) else { return (0.0, 0.0) };
+        let sa = cosv(sub(p(a), p(q[(i + 3) % 4])), sub(p(x), p(a)));
+        let sb = cosv(sub(p(b), p(q[(i + 2) % 4])), sub(p(y), p(b)));
+        let mean_edge = |qq: [u32; 4]| {
+            (0..4)
+                .map(|k| {
+                    let e = sub(p(qq[(k + 1) % 4]), p(qq[k]));
+                    (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt()
+                })
+                .sum::<f32>()
+                / 4.0
+        };
+        let (lc, ld) = (mean_edge(q), mean_edge(qd));
+        let ratio = if lc > 0.0 && ld > 0.0 { (ld / lc).ln() } else { 0.0 };
+        (sa.min(sb), ratio)
     }
 
     /// The refinement input of every candidate ([`refine_features`] documents the
@@ -323,22 +456,32 @@ impl CandidateGraph {
                 high[v as usize] += (p > 0.5) as u32;
             }
         }
-        let mut out = vec![0.0f32; m * REFINE_DIM];
-        crate::par::for_each_chunk_mut(&mut out, REFINE_DIM * 256, |ch, chunk| {
-            for (r, row) in chunk.chunks_exact_mut(REFINE_DIM).enumerate() {
+        let dim = self.input.dim();
+        let flow = self.input == RefineInput::Flow;
+        let mut out = vec![0.0f32; m * dim];
+        crate::par::for_each_chunk_mut(&mut out, dim * 256, |ch, chunk| {
+            for (r, row) in chunk.chunks_exact_mut(dim).enumerate() {
                 let c = ch * 256 + r;
                 let (q, p) = (self.quads[c], probs[c]);
                 let me = c as u32;
                 let (mut rival, mut across, mut shared) = ([0.0f32; 4], [0.0f32; 4], [0.0f32; 4]);
                 let (mut at, mut hi) = ([0.0f32; 4], [0.0f32; 4]);
+                let (mut fl, mut sz) = ([0.0f32; 4], [0.0f32; 4]);
                 for i in 0..4 {
-                    (rival[i], across[i]) = match &self.sides {
+                    let nb;
+                    (rival[i], across[i], nb) = match &self.sides {
                         Sides::Direction { dir, rev_group } => (
                             best_other(&dir_best, dir.of_slot[4 * c + i], me),
                             best_other(&dir_best, rev_group[4 * c + i], me),
+                            NONE,
                         ),
                         Sides::Normals(nrm) => self.sides_by_normals(nrm, probs, c, i),
                     };
+                    if flow && nb != NONE {
+                        let (f, r) = self.flow(c, i, nb);
+                        fl[i] = across[i] * f;
+                        sz[i] = across[i] * r.abs();
+                    }
                     shared[i] = best_other(&pair, self.pairs.of_slot[6 * c + i], me);
                     let a = q[i] as usize;
                     at[i] = (mass[a] - p as f64) as f32;
@@ -359,6 +502,10 @@ impl CandidateGraph {
                 row[18..22].copy_from_slice(&sorted4(hi));
                 row[22..26].copy_from_slice(&sorted4(shared));
                 row[26] = logit(base[c]);
+                if flow {
+                    row[27..31].copy_from_slice(&sorted4(fl));
+                    row[31..35].copy_from_slice(&sorted4(sz));
+                }
             }
         });
         Ok(out)
@@ -400,6 +547,34 @@ pub fn refine_features(
     CandidateGraph::new(quads, points, rule)?.features(probs, base)
 }
 
+/// The input of rounds that read `input`, `M × input.dim()` row-major. For
+/// [`RefineInput::Base`] the columns of [`refine_features`]; for [`RefineInput::Flow`]
+/// those 27 and (each group of four sorted ascending; n_i = the best neighbour across
+/// edge i under [`SideRule::Normals`] — among equally probable ones the one whose
+/// cyclic order started at its smallest corner is lexicographically smallest — and p_i
+/// its probability, column 5 + i before sorting; both 0 when edge i has none):
+///
+/// * 27–30: per edge, p_i × the straightness of the lattice lines n_i continues: at each
+///   end of the edge, the cosine between the candidate's side arriving there and n_i's
+///   other side leaving it; the smaller of the two (1 on a regular grid);
+/// * 31–34: per edge, p_i × |ln(mean edge length of n_i / that of the candidate)|.
+///
+/// The flow columns are invariant under rotation, translation and uniform scaling of
+/// the points, like the rest.
+///
+/// # Errors
+/// As [`CandidateGraph::with_input`] and [`CandidateGraph::features`].
+pub fn refine_features_with(
+    quads: &[[u32; 4]],
+    points: &[[f32; 3]],
+    rule: SideRule,
+    input: RefineInput,
+    probs: &[f32],
+    base: &[f32],
+) -> Result<Vec<f32>> {
+    CandidateGraph::with_input(quads, points, rule, input)?.features(probs, base)
+}
+
 /// A layer's weight `[cout × cin]`, bias, `cin` and `cout`, borrowed from the store.
 type LayerRef<'a> = (&'a [f32], Option<&'a [f32]>, usize, usize);
 
@@ -439,6 +614,8 @@ pub struct Refiner {
     pub rounds: Vec<RefineRound>,
     /// How the rounds read rivals and neighbours (fixed when they are trained).
     pub sides: SideRule,
+    /// What the rounds read (fixed when they are trained).
+    pub input: RefineInput,
 }
 
 impl Refiner {
@@ -451,32 +628,37 @@ impl Refiner {
         rounds: usize,
         widths: &[usize],
         sides: SideRule,
+        input: RefineInput,
         rng: &mut Rng,
     ) -> Result<Refiner> {
+        if input == RefineInput::Flow && sides != SideRule::Normals {
+            return Err(Error::invalid("refinement input flow needs sides read by normals"));
+        }
+        let dim = input.dim();
         let mut out = Vec::with_capacity(rounds);
         for r in 0..rounds {
             let name = format!("refine.{r}");
-            let mean =
-                params.add(&format!("{name}.mean"), ParamKind::Buffer, Tensor::zeros(&[REFINE_DIM])?)?;
+            let mean = params.add(&format!("{name}.mean"), ParamKind::Buffer, Tensor::zeros(&[dim])?)?;
             let scale =
-                params.add(&format!("{name}.scale"), ParamKind::Buffer, Tensor::full(&[REFINE_DIM], 1.0)?)?;
+                params.add(&format!("{name}.scale"), ParamKind::Buffer, Tensor::full(&[dim], 1.0)?)?;
             let mut layers = Vec::new();
-            let mut cin = REFINE_DIM;
+            let mut cin = dim;
             for (l, &w) in widths.iter().chain(std::iter::once(&2)).enumerate() {
                 layers.push(Conv1d::new(params, &format!("{name}.{l}"), cin, w, true, rng)?);
                 cin = w;
             }
             out.push(RefineRound { mean, scale, layers });
         }
-        Ok(Refiner { rounds: out, sides })
+        Ok(Refiner { rounds: out, sides, input })
     }
 
     /// Standardised rows of `x` for round `r`.
     fn standardise(&self, params: &ParamStore, r: usize, mut x: Vec<f32>) -> Vec<f32> {
         let mean = params.get(self.rounds[r].mean).data().to_vec();
         let scale = params.get(self.rounds[r].scale).data().to_vec();
-        crate::par::for_each_chunk_mut(&mut x, REFINE_DIM * 1024, |_, chunk| {
-            for row in chunk.chunks_exact_mut(REFINE_DIM) {
+        let dim = self.input.dim();
+        crate::par::for_each_chunk_mut(&mut x, dim * 1024, |_, chunk| {
+            for row in chunk.chunks_exact_mut(dim) {
                 for ((v, m), s) in row.iter_mut().zip(&mean).zip(&scale) {
                     *v = (*v - m) * s;
                 }
@@ -485,7 +667,7 @@ impl Refiner {
         x
     }
 
-    /// Round `r`'s logits `[M × 2]` for standardised rows `x` `[M × REFINE_DIM]`.
+    /// Round `r`'s logits `[M × 2]` for standardised rows `x` `[M × input.dim()]`.
     fn forward(&self, g: &mut Graph, r: usize, x: Var) -> Result<Var> {
         let layers = &self.rounds[r].layers;
         let mut h = x;
@@ -524,17 +706,18 @@ impl Refiner {
             .iter()
             .map(|l| (params.get(l.weight).data(), l.bias.map(|b| params.get(b).data()), l.cin, l.cout))
             .collect();
-        let width = layers.iter().map(|l| l.2.max(l.3)).max().unwrap_or(0).max(REFINE_DIM);
-        if layers.last().map(|l| l.3) != Some(2) || feats.len() % REFINE_DIM != 0 {
+        let dim = self.input.dim();
+        let width = layers.iter().map(|l| l.2.max(l.3)).max().unwrap_or(0).max(dim);
+        if layers.last().map(|l| l.3) != Some(2) || feats.len() % dim != 0 {
             return Err(Error::Shape { op: "refine", msg: "rows or last layer do not fit".into() });
         }
         const ROWS: usize = 512;
-        let mut out = vec![0.0f32; feats.len() / REFINE_DIM];
+        let mut out = vec![0.0f32; feats.len() / dim];
         crate::par::for_each_chunk_mut(&mut out, ROWS, |ch, chunk| {
             let (mut x, mut y) = (vec![0.0f32; width], vec![0.0f32; width]);
             for (i, o) in chunk.iter_mut().enumerate() {
-                let row = &feats[(ch * ROWS + i) * REFINE_DIM..][..REFINE_DIM];
-                for j in 0..REFINE_DIM {
+                let row = &feats[(ch * ROWS + i) * dim..][..dim];
+                for j in 0..dim {
                     x[j] = if standardised { row[j] } else { (row[j] - mean[j]) * scale[j] };
                 }
                 for (l, &(w, b, cin, cout)) in layers.iter().enumerate() {
@@ -562,7 +745,7 @@ impl Refiner {
         quads: &[[u32; 4]],
         base: &[f32],
     ) -> Result<Vec<f32>> {
-        let graph = CandidateGraph::new(quads, points, self.sides)?;
+        let graph = CandidateGraph::with_input(quads, points, self.sides, self.input)?;
         let mut p = base.to_vec();
         for r in 0..self.rounds.len() {
             let f = graph.features(&p, base)?;
@@ -694,11 +877,11 @@ fn all_features(
         .collect()
 }
 
-fn graphs_of(samples: &[RefineSample], sides: SideRule) -> Result<Vec<CandidateGraph>> {
+fn graphs_of(samples: &[RefineSample], sides: SideRule, input: RefineInput) -> Result<Vec<CandidateGraph>> {
     samples
         .iter()
         .map(|s| {
-            CandidateGraph::new(&s.quads, &s.points, sides)
+            CandidateGraph::with_input(&s.quads, &s.points, sides, input)
                 .map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))
         })
         .collect()
@@ -736,7 +919,9 @@ pub fn train_refiner(
     }
     let labels: Vec<u8> = train.iter().flat_map(|s| s.labels.iter().copied()).collect();
     let val_labels: Vec<u8> = val.iter().flat_map(|s| s.labels.iter().copied()).collect();
-    let (train_graphs, val_graphs) = (graphs_of(train, refiner.sides)?, graphs_of(val, refiner.sides)?);
+    let (train_graphs, val_graphs) =
+        (graphs_of(train, refiner.sides, refiner.input)?, graphs_of(val, refiner.sides, refiner.input)?);
+    let dim = refiner.input.dim();
     let mut cur_train: Vec<Vec<f32>> = train.iter().map(|s| s.base.clone()).collect();
     let mut cur_val: Vec<Vec<f32>> = val.iter().map(|s| s.base.clone()).collect();
     let mut rng = Rng::new(cfg.seed);
@@ -744,9 +929,9 @@ pub fn train_refiner(
     for r in 0..refiner.rounds.len() {
         let x: Vec<f32> = all_features(&train_graphs, train, &cur_train)?.concat();
         // Standardisation from the training rows (f64 sums).
-        let (mut mean, mut sq) = (vec![0.0f64; REFINE_DIM], vec![0.0f64; REFINE_DIM]);
-        for row in x.chunks_exact(REFINE_DIM) {
-            for j in 0..REFINE_DIM {
+        let (mut mean, mut sq) = (vec![0.0f64; dim], vec![0.0f64; dim]);
+        for row in x.chunks_exact(dim) {
+            for j in 0..dim {
                 mean[j] += row[j] as f64;
                 sq[j] += (row[j] as f64) * (row[j] as f64);
             }
@@ -761,8 +946,8 @@ pub fn train_refiner(
                 (1.0 / (var.sqrt() + 1e-6)) as f32
             })
             .collect();
-        params.set(refiner.rounds[r].mean, Tensor::new(&[REFINE_DIM], mean)?)?;
-        params.set(refiner.rounds[r].scale, Tensor::new(&[REFINE_DIM], scale)?)?;
+        params.set(refiner.rounds[r].mean, Tensor::new(&[dim], mean)?)?;
+        params.set(refiner.rounds[r].scale, Tensor::new(&[dim], scale)?)?;
         let x = refiner.standardise(params, r, x);
         let mut sgd = Sgd::new(cfg.sgd)?;
         let schedule = ExpDecay { lr0: cfg.sgd.lr, factor: 0.1, period: cfg.epochs as f32 };
@@ -774,15 +959,15 @@ pub fn train_refiner(
             rng.shuffle(&mut order);
             let (mut loss_sum, mut steps) = (0.0f64, 0usize);
             for batch in order.chunks(cfg.batch) {
-                let mut xb = Vec::with_capacity(batch.len() * REFINE_DIM);
+                let mut xb = Vec::with_capacity(batch.len() * dim);
                 let mut yb = Vec::with_capacity(batch.len());
                 for &i in batch {
                     let i = i as usize;
-                    xb.extend_from_slice(&x[i * REFINE_DIM..(i + 1) * REFINE_DIM]);
+                    xb.extend_from_slice(&x[i * dim..(i + 1) * dim]);
                     yb.push(labels[i]);
                 }
                 let mut g = Graph::train(params);
-                let xv = g.input(Tensor::new(&[batch.len(), REFINE_DIM], xb)?);
+                let xv = g.input(Tensor::new(&[batch.len(), dim], xb)?);
                 let logits = refiner.forward(&mut g, r, xv)?;
                 let loss = weighted_cross_entropy(&mut g, logits, &yb, 1.0)?;
                 let lv = g.value(loss).item()? as f64;
@@ -833,19 +1018,26 @@ mod tests {
     /// training path) up to float rounding, and a wrong weight would show.
     #[test]
     fn row_inference_equals_the_tape_forward() {
+        for input in [RefineInput::Base, RefineInput::Flow] {
+            row_inference_case(input);
+        }
+    }
+
+    fn row_inference_case(input: RefineInput) {
         let mut params = ParamStore::new();
         let mut rng = Rng::new(4);
-        let refiner = Refiner::new(&mut params, 2, &[32, 16], SideRule::Normals, &mut rng).unwrap();
+        let refiner = Refiner::new(&mut params, 2, &[32, 16], SideRule::Normals, input, &mut rng).unwrap();
+        let dim = input.dim();
         let m = 700;
-        let feats: Vec<f32> = (0..m * REFINE_DIM).map(|_| rng.uniform(-3.0, 3.0) as f32).collect();
-        let mean: Vec<f32> = (0..REFINE_DIM).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
-        let scale: Vec<f32> = (0..REFINE_DIM).map(|_| rng.uniform(0.5, 2.0) as f32).collect();
-        params.set(refiner.rounds[1].mean, Tensor::new(&[REFINE_DIM], mean).unwrap()).unwrap();
-        params.set(refiner.rounds[1].scale, Tensor::new(&[REFINE_DIM], scale).unwrap()).unwrap();
+        let feats: Vec<f32> = (0..m * dim).map(|_| rng.uniform(-3.0, 3.0) as f32).collect();
+        let mean: Vec<f32> = (0..dim).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+        let scale: Vec<f32> = (0..dim).map(|_| rng.uniform(0.5, 2.0) as f32).collect();
+        params.set(refiner.rounds[1].mean, Tensor::new(&[dim], mean).unwrap()).unwrap();
+        params.set(refiner.rounds[1].scale, Tensor::new(&[dim], scale).unwrap()).unwrap();
         let tape = |params: &ParamStore| {
             let x = refiner.standardise(params, 1, feats.clone());
             let mut g = Graph::eval_shared(params);
-            let xv = g.input(Tensor::new(&[m, REFINE_DIM], x).unwrap());
+            let xv = g.input(Tensor::new(&[m, dim], x).unwrap());
             let logits = refiner.forward(&mut g, 1, xv).unwrap();
             crate::pipeline::model::probabilities(g.value(logits).data())
         };

@@ -7,7 +7,7 @@ use crate::output::say;
 use point2quad::nn::checkpoint;
 use point2quad::pipeline::model::{Model, MAX_REFINE_ROUNDS};
 use point2quad::pipeline::refine::{
-    train_refiner, RefineProgress, RefineSample, RefineTrainConfig, SideRule,
+    train_refiner, RefineInput, RefineProgress, RefineSample, RefineTrainConfig, SideRule,
 };
 use point2quad::pipeline::train::{check_samples, sample_input};
 use point2quad::{Error, Result};
@@ -23,7 +23,9 @@ Scores every candidate of the .p2qs samples in DIR with BASE's classifier, then
 trains ROUNDS small MLPs one after the other: each reads, per candidate, its current
 probability and those of its rivals and neighbours (the best other candidate on
 the same side of each edge, across each edge, over its diagonals, the probability
-mass at its corners) and gives a new probability. BASE's classifier (and point encoder) is
+mass at its corners; with --features flow also how the best neighbour across
+each edge continues the candidate's lattice lines and how its size compares) and
+gives a new probability. BASE's classifier (and point encoder) is
 copied unchanged; rounds BASE already had are replaced. The validation split is
 train's (same hash of the sample name, same --val-fraction and --hold-out), so use the dataset
 BASE was trained on. MODEL is written atomically at the end (a run takes minutes).
@@ -53,6 +55,10 @@ OPTIONS:
                           run the edge, reversed where their normals point opposite
                           ways (an orientation seam); direction = by direction alone
                           (models refined before session 8) [normals]
+    --features SET        what a round reads: flow = the probability columns and the
+                          8 flow columns (the shipped weights since session 18; needs
+                          --sides normals); base = the probability columns alone
+                          (models refined before session 18) [flow]
 ";
 
 const SPEC: Spec = Spec {
@@ -69,6 +75,7 @@ const SPEC: Spec = Spec {
         "--val-fraction",
         "--hold-out",
         "--sides",
+        "--features",
         "--fold-models",
     ],
     switches: &[],
@@ -104,6 +111,14 @@ pub fn run(argv: &[String]) -> Result<()> {
     let sides = SideRule::from_name(sides_name).ok_or_else(|| {
         Error::Usage(format!("refine: --sides {sides_name:?}: expected normals or direction"))
     })?;
+    let input_name = a.value("--features").unwrap_or("flow");
+    let input = RefineInput::from_name(input_name)
+        .ok_or_else(|| Error::Usage(format!("refine: --features {input_name:?}: expected flow or base")))?;
+    if input == RefineInput::Flow && sides != SideRule::Normals {
+        return Err(Error::Usage(
+            "refine: --features flow needs --sides normals (use --features base)".into(),
+        ));
+    }
     let mut cfg = RefineTrainConfig::default();
     cfg.epochs = a.parsed_in(cmd, "--epochs", cfg.epochs, 1, 1000, "passes per round")?;
     cfg.batch = a.parsed_in(cmd, "--batch", cfg.batch, 1, 1_000_000, "candidates per step")?;
@@ -139,7 +154,7 @@ pub fn run(argv: &[String]) -> Result<()> {
             ms
         }
     };
-    let mut model = base.with_refinement(rounds, &widths, sides, cfg.seed)?;
+    let mut model = base.with_refinement_reading(rounds, &widths, sides, input, cfg.seed)?;
 
     let t0 = std::time::Instant::now();
     let samples = load_dir(&data)?;

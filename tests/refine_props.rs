@@ -153,7 +153,7 @@ fn reference_row(
                         let opp = normal_cos(pts, &q, qd) <= -0.5;
                         if ((bw && !opp) || (fw && opp)) && p[d] == across[i] {
                             let k = start_min(qd);
-                            if chosen.is_none_or(|o| k < o) {
+                            if chosen.map_or(true, |o| k < o) {
                                 chosen = Some(k);
                             }
                         }

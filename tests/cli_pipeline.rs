@@ -362,9 +362,10 @@ fn reconstruct_bounds_k() {
     assert!(!Path::new(&s.p("o.obj")).exists(), "mesh left behind");
 }
 
-/// `refine` of `rounds` rounds of width 4, one epoch, on the tiny data.
-fn refine_tiny(data: &str, model: &str, out: &str, rounds: &str) -> Output {
-    ok(&[
+/// `refine` of `rounds` rounds of width 4, one epoch, on the tiny data, with `extra`
+/// options.
+fn refine_tiny(data: &str, model: &str, out: &str, rounds: &str, extra: &[&str]) -> Output {
+    let mut args = vec![
         "refine",
         "--data",
         data,
@@ -380,7 +381,9 @@ fn refine_tiny(data: &str, model: &str, out: &str, rounds: &str) -> Output {
         "1",
         "--val-fraction",
         "0.5",
-    ])
+    ];
+    args.extend_from_slice(extra);
+    ok(&args)
 }
 
 /// `refine` end to end on the tiny data: the rounds train, the weights file is
@@ -392,7 +395,7 @@ fn refine_trains_rounds_that_reconstruct_reads() {
     let model = trained(&s);
     let data = s.p("data");
     let refined = s.p("r.p2qm");
-    let out = refine_tiny(&data, &model, &refined, "2");
+    let out = refine_tiny(&data, &model, &refined, "2", &[]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("round 1:") && err.contains("round 2:") && err.contains("AP"), "{err}");
     let m = point2quad::pipeline::model::Model::load(Path::new(&refined)).unwrap();
@@ -402,25 +405,7 @@ fn refine_trains_rounds_that_reconstruct_reads() {
     // The flow columns by default (session 18); `--features base` gives the older input.
     assert_eq!(m.config().refine_input, point2quad::pipeline::refine::RefineInput::Flow);
     let base_refined = s.p("rb.p2qm");
-    ok(&[
-        "refine",
-        "--data",
-        &data,
-        "--model",
-        &model,
-        "--out",
-        &base_refined,
-        "--rounds",
-        "1",
-        "--widths",
-        "4",
-        "--epochs",
-        "1",
-        "--val-fraction",
-        "0.5",
-        "--features",
-        "base",
-    ]);
+    refine_tiny(&data, &model, &base_refined, "1", &["--features", "base"]);
     let mb = point2quad::pipeline::model::Model::load(Path::new(&base_refined)).unwrap();
     assert_eq!(mb.config().refine_input, point2quad::pipeline::refine::RefineInput::Base);
     assert!(!mb.config().to_text().contains("refine_input"), "{}", mb.config().to_text());
@@ -454,27 +439,7 @@ fn refine_trains_rounds_that_reconstruct_reads() {
     let err =
         fails(&["refine", "--data", &data, "--model", &model, "--out", &never, "--sides", "direction"], 2);
     assert!(err.contains("--features flow") && err.contains("--sides normals"), "{err}");
-    ok(&[
-        "refine",
-        "--data",
-        &data,
-        "--model",
-        &model,
-        "--out",
-        &base_refined,
-        "--rounds",
-        "1",
-        "--widths",
-        "4",
-        "--epochs",
-        "1",
-        "--val-fraction",
-        "0.5",
-        "--features",
-        "base",
-        "--sides",
-        "direction",
-    ]);
+    refine_tiny(&data, &model, &base_refined, "1", &["--features", "base", "--sides", "direction"]);
     let err = fails(&["refine", "--data", &data, "--model", &s.p("missing.p2qm"), "--out", &never], 1);
     assert!(err.contains("missing.p2qm"), "{err}");
     let err = fails(&["refine", "--data", &s.p("nowhere"), "--model", &model, "--out", &never], 1);
@@ -594,7 +559,7 @@ fn train_init_fine_tunes_from_weights() {
     assert!(moved, "--init trained nothing");
     // From a refined model: its rounds go.
     let refined = s.p("r.p2qm");
-    refine_tiny(&data, &model, &refined, "1");
+    refine_tiny(&data, &model, &refined, "1", &[]);
     let args = with(&["--init", &refined, "--max-candidates", "300"]);
     let out = ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(String::from_utf8_lossy(&out.stderr).contains("refinement rounds are dropped"));

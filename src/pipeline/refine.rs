@@ -7,8 +7,9 @@
 //! neighbours. A refinement round reads, per candidate, its current probability and
 //! what the other candidates' probabilities say about it ([`refine_features`]: the best
 //! rival on each of its directed edges, the best neighbour across each edge, rivals over
-//! its diagonals, the probability mass at its corners), and a small MLP gives a new
-//! probability. Rounds chain (round r reads round r − 1's output), like a few steps of
+//! its diagonals, the probability mass at its corners; since session 18 also how that
+//! neighbour continues the candidate's lattice lines, [`refine_features_with`]), and a
+//! small MLP gives a new probability. Rounds chain (round r reads round r − 1's output), like a few steps of
 //! message passing over the candidate graph; each is trained on the previous round's
 //! output over the training samples ([`train_refiner`]), with the classifier frozen.
 //!
@@ -33,7 +34,6 @@ use crate::rng::Rng;
 use crate::tensor::{Grads, Graph, ParamId, ParamKind, ParamStore, Tensor, Var};
 use crate::{Error, Result};
 
-/// Values per candidate read by a refinement round ([`refine_features`]).
 /// Values per candidate read by a refinement round of [`RefineInput::Base`]
 /// ([`refine_features`]).
 pub const REFINE_DIM: usize = 27;
@@ -339,8 +339,8 @@ impl CandidateGraph {
     }
 
     /// Under [`SideRule::Normals`]: the best rival and the best neighbour of candidate
-    /// `c` on its edge `i` (and that neighbour; `NONE` when there is none), scanning the other candidates that hold that pair of points
-    /// as an edge.
+    /// `c` on its edge `i` (and that neighbour; `NONE` when there is none), scanning the
+    /// other candidates that hold that pair of points as an edge.
     fn sides_by_normals(&self, nrm: &[[f32; 3]], probs: &[f32], c: usize, i: usize) -> (f32, f32, u32) {
         let q = self.quads[c];
         let (a, b) = (q[i], q[(i + 1) % 4]);

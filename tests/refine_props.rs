@@ -380,6 +380,10 @@ fn features_refuse_bad_inputs() {
             assert!(refine_features(&q, &pts(4), rule, &[0.5], &[bad]).is_err());
         }
     }
+    // The flow columns need the normals rule.
+    let err = refine_features_with(&q, &pts(4), SideRule::Direction, RefineInput::Flow, &[0.5], &[0.5])
+        .unwrap_err();
+    assert!(err.to_string().contains("normals"), "{err}");
 }
 
 /// A model with rounds keeps the classifier bit for bit, and its weights file and
@@ -450,6 +454,14 @@ fn refined_model_keeps_the_classifier_and_round_trips() {
     assert!(ftext.contains("refine_input = flow"), "{ftext}");
     assert!(!text.contains("refine_input"), "{text}");
     assert_eq!(&ModelConfig::from_text(&ftext, Path::new("cfg")).unwrap(), flow.config());
+    // The refinement keys are optional: they do not stand in for missing required ones.
+    let short: String = ftext
+        .lines()
+        .filter(|l| !["preset", "use_context", "leaky_slope"].iter().any(|k| l.starts_with(k)))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let err = ModelConfig::from_text(&short, Path::new("cfg")).unwrap_err();
+    assert!(err.to_string().contains("missing keys"), "{err}");
     assert_eq!(flow.predict_base(&s.points, &s.candidates, &x).unwrap(), want);
     let fgot = flow.predict_with_points(&s.points, &s.candidates, &x).unwrap();
     assert_ne!(fgot, got, "the flow columns changed nothing");

@@ -179,7 +179,7 @@ pub(crate) fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 #[inline]
-fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+pub(crate) fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 #[inline]
@@ -187,7 +187,7 @@ pub(crate) fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 #[inline]
-fn norm(a: [f32; 3]) -> f32 {
+pub(crate) fn norm(a: [f32; 3]) -> f32 {
     dot(a, a).sqrt()
 }
 
@@ -926,7 +926,7 @@ fn vertex_set(q: &[u32; 4]) -> [u32; 4] {
 }
 
 /// Rotates a cyclic quad so its smallest index comes first (direction kept).
-fn canonical(q: [u32; 4]) -> [u32; 4] {
+pub(crate) fn canonical(q: [u32; 4]) -> [u32; 4] {
     let s = (0..4).min_by_key(|&i| q[i]).expect("internal error: 4 corners");
     [q[s], q[(s + 1) % 4], q[(s + 2) % 4], q[(s + 3) % 4]]
 }

@@ -329,6 +329,7 @@ impl ModelConfig {
                 "refine_sides" => {
                     c.refine_sides = SideRule::from_name(v)
                         .ok_or_else(|| bad("refine_sides must be direction or normals"))?;
+                    optional_seen += 1;
                 }
                 "refine_input" => {
                     c.refine_input =

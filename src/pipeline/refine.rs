@@ -30,6 +30,7 @@ use crate::nn::conv1d::Conv1d;
 use crate::nn::loss::weighted_cross_entropy;
 use crate::nn::module::Module;
 use crate::nn::optim::{ExpDecay, Sgd, SgdConfig};
+use crate::pipeline::candidates::{canonical, dot as dot3, norm as norm3, sub as sub3};
 use crate::rng::Rng;
 use crate::tensor::{Grads, Graph, ParamId, ParamKind, ParamStore, Tensor, Var};
 use crate::{Error, Result};
@@ -258,13 +259,6 @@ fn best_other(best: &[(f32, u32, f32)], g: u32, me: u32) -> f32 {
     }
 }
 
-/// `q`'s cyclic order started at its smallest corner (the form `candidates::generate`
-/// lists and sorts candidates by).
-fn rotated_to_min(q: [u32; 4]) -> [u32; 4] {
-    let s = (0..4).min_by_key(|&i| q[i]).unwrap_or(0);
-    [q[s], q[(s + 1) % 4], q[(s + 2) % 4], q[(s + 3) % 4]]
-}
-
 fn sorted4(mut v: [f32; 4]) -> [f32; 4] {
     v.sort_unstable_by(f32::total_cmp);
     v
@@ -365,7 +359,7 @@ impl CandidateGraph {
                 // order of the list.
                 let better = across_id == NONE
                     || pd > across
-                    || (pd == across && rotated_to_min(qd) < rotated_to_min(self.quads[across_id as usize]));
+                    || (pd == across && canonical(qd) < canonical(self.quads[across_id as usize]));
                 if better {
                     across = pd;
                     across_id = d;
@@ -396,28 +390,19 @@ impl CandidateGraph {
                 None
             }
         };
-        let sub = |x: [f32; 3], y: [f32; 3]| [x[0] - y[0], x[1] - y[1], x[2] - y[2]];
         let cosv = |u: [f32; 3], v: [f32; 3]| {
-            let l = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()
-                * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            let l = norm3(u) * norm3(v);
             if l > 0.0 {
-                (u[0] * v[0] + u[1] * v[1] + u[2] * v[2]) / l
+                dot3(u, v) / l
             } else {
                 0.0
             }
         };
         let (Some(x), Some(y)) = (other(a, b), other(b, a)) else { return (0.0, 0.0) };
-        let sa = cosv(sub(p(a), p(q[(i + 3) % 4])), sub(p(x), p(a)));
-        let sb = cosv(sub(p(b), p(q[(i + 2) % 4])), sub(p(y), p(b)));
-        let mean_edge = |qq: [u32; 4]| {
-            (0..4)
-                .map(|k| {
-                    let e = sub(p(qq[(k + 1) % 4]), p(qq[k]));
-                    (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt()
-                })
-                .sum::<f32>()
-                / 4.0
-        };
+        let sa = cosv(sub3(p(a), p(q[(i + 3) % 4])), sub3(p(x), p(a)));
+        let sb = cosv(sub3(p(b), p(q[(i + 2) % 4])), sub3(p(y), p(b)));
+        let mean_edge =
+            |qq: [u32; 4]| (0..4).map(|k| norm3(sub3(p(qq[(k + 1) % 4]), p(qq[k])))).sum::<f32>() / 4.0;
         let (lc, ld) = (mean_edge(q), mean_edge(qd));
         let ratio = if lc > 0.0 && ld > 0.0 { (ld / lc).ln() } else { 0.0 };
         (sa.min(sb), ratio)

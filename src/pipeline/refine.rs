@@ -560,24 +560,27 @@ pub fn refine_features_with(
     CandidateGraph::with_input(quads, points, rule, input)?.features(probs, base)
 }
 
-/// A layer's weight `[cout × cin]`, bias, `cin` and `cout`, borrowed from the store.
-type LayerRef<'a> = (&'a [f32], Option<&'a [f32]>, usize, usize);
+/// A layer's weight transposed (`[cin × cout]`), bias (borrowed from the store), `cin`
+/// and `cout`.
+type LayerRef<'a> = (Vec<f32>, Option<&'a [f32]>, usize, usize);
 
-/// Dot product with 8 independent sums (so that it vectorises).
-fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    for (x, y) in ca.zip(cb) {
-        for k in 0..8 {
-            acc[k] += x[k] * y[k];
+/// `y[..cout] = bias + W x` for one row, with `wt` the weight transposed (`[cin × cout]`,
+/// so that the inner loop runs over contiguous outputs and vectorises). Each output is
+/// summed in input order; inputs that are exactly 0 (ReLU's, about half of them) are
+/// skipped, which changes no sum.
+fn affine_row(wt: &[f32], bias: Option<&[f32]>, x: &[f32], y: &mut [f32]) {
+    match bias {
+        Some(b) => y.copy_from_slice(b),
+        None => y.fill(0.0),
+    }
+    let cout = y.len();
+    for (xj, col) in x.iter().zip(wt.chunks_exact(cout)) {
+        if *xj != 0.0 {
+            for (yk, wk) in y.iter_mut().zip(col) {
+                *yk += wk * xj;
+            }
         }
     }
-    let mut s = acc.iter().sum::<f32>();
-    for (x, y) in ra.iter().zip(rb) {
-        s += x * y;
-    }
-    s
 }
 
 /// One refinement round: input standardisation (stored buffers) and an MLP
@@ -675,7 +678,7 @@ impl Refiner {
     /// Round `r`'s probabilities from feature rows (inference; `standardised`: the rows
     /// went through [`Refiner::standardise`] already): the MLP row by row (equal to
     /// [`Refiner::forward`] on standardised rows up to float rounding; a `[M × 27]`
-    /// GEMM through the tape is slower than these dot products).
+    /// GEMM through the tape is slower than [`affine_row`] on rows kept in cache).
     fn round_probs(
         &self,
         params: &ParamStore,
@@ -686,14 +689,30 @@ impl Refiner {
         let round = &self.rounds[r];
         let mean = params.get(round.mean).data();
         let scale = params.get(round.scale).data();
+        // Weights transposed once per call (`[cin × cout]`), for [`affine_row`].
         let layers: Vec<LayerRef> = round
             .layers
             .iter()
-            .map(|l| (params.get(l.weight).data(), l.bias.map(|b| params.get(b).data()), l.cin, l.cout))
+            .map(|l| {
+                let w = params.get(l.weight).data();
+                let (cin, cout) = (l.cin, l.cout);
+                let mut wt = vec![0.0f32; w.len()];
+                if w.len() == cin * cout {
+                    for k in 0..cout {
+                        for j in 0..cin {
+                            wt[j * cout + k] = w[k * cin + j];
+                        }
+                    }
+                }
+                (wt, l.bias.map(|b| params.get(b).data()), cin, cout)
+            })
             .collect();
         let dim = self.input.dim();
         let width = layers.iter().map(|l| l.2.max(l.3)).max().unwrap_or(0).max(dim);
-        if layers.last().map(|l| l.3) != Some(2) || feats.len() % dim != 0 {
+        let fits = layers
+            .iter()
+            .all(|(wt, b, cin, cout)| wt.len() == cin * cout && b.map_or(true, |b| b.len() == *cout));
+        if layers.last().map(|l| l.3) != Some(2) || feats.len() % dim != 0 || !fits {
             return Err(Error::Shape { op: "refine", msg: "rows or last layer do not fit".into() });
         }
         const ROWS: usize = 512;
@@ -705,10 +724,12 @@ impl Refiner {
                 for j in 0..dim {
                     x[j] = if standardised { row[j] } else { (row[j] - mean[j]) * scale[j] };
                 }
-                for (l, &(w, b, cin, cout)) in layers.iter().enumerate() {
-                    for (k, yk) in y[..cout].iter_mut().enumerate() {
-                        let v = dot(&w[k * cin..(k + 1) * cin], &x[..cin]) + b.map_or(0.0, |b| b[k]);
-                        *yk = if l + 1 < layers.len() { v.max(0.0) } else { v };
+                for (l, (wt, b, cin, cout)) in layers.iter().enumerate() {
+                    affine_row(wt, *b, &x[..*cin], &mut y[..*cout]);
+                    if l + 1 < layers.len() {
+                        for v in &mut y[..*cout] {
+                            *v = v.max(0.0);
+                        }
                     }
                     std::mem::swap(&mut x, &mut y);
                 }

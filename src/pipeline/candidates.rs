@@ -880,19 +880,23 @@ fn inside_count(c: &Pre, rel: &[[f32; 3]], cfg: &CandidateConfig) -> u16 {
         let m = cross(c.normal, d);
         en[e] = [m[0] / c.len[e], m[1] / c.len[e], m[2] / c.len[e]];
     }
-    let mut inside = 0u16;
-    for (l, r) in rel.iter().enumerate() {
-        if c.local.contains(&(l + 1)) {
-            continue;
-        }
-        if dot(sub(*r, centre), c.normal).abs() > tol_plane {
-            continue;
-        }
-        if (0..4).all(|e| dot(en[e], sub(*r, q3[e])) >= -margin) {
-            inside += 1;
+    // Branch-free over all neighbours (it vectorises), then the quad's own three
+    // corners, which the count excludes, taken back out with the same test.
+    let passes = |r: &[f32; 3]| {
+        let off_plane = dot(sub(*r, centre), c.normal).abs() > tol_plane;
+        let within = (dot(en[0], sub(*r, q3[0])) >= -margin)
+            & (dot(en[1], sub(*r, q3[1])) >= -margin)
+            & (dot(en[2], sub(*r, q3[2])) >= -margin)
+            & (dot(en[3], sub(*r, q3[3])) >= -margin);
+        !off_plane & within
+    };
+    let mut inside: u32 = rel.iter().map(|r| u32::from(passes(r))).sum();
+    for &l in &c.local {
+        if let Some(r) = l.checked_sub(1).and_then(|i| rel.get(i)) {
+            inside -= u32::from(passes(r));
         }
     }
-    inside
+    inside.min(u32::from(u16::MAX)) as u16
 }
 
 /// One kept candidate of one proposer: (sorted vertex key, canonical cyclic quad,
@@ -1147,6 +1151,77 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The inside count against the plain definition (skip the quad's own corners,
+    /// then test plane distance and the four edge lines one by one), on random quads
+    /// and neighbourhoods with points placed on the plane, on edge lines and at the
+    /// corners, so that the boundary cases of every test are hit.
+    #[test]
+    fn inside_count_matches_the_definition() {
+        let mut rng = crate::rng::Rng::new(11);
+        let cfg = CandidateConfig::default();
+        let mut seen = [0usize; 3];
+        for _ in 0..4000 {
+            let q3: [[f32; 3]; 4] = std::array::from_fn(|_| std::array::from_fn(|_| rng.f32() * 2.0 - 1.0));
+            let normal = {
+                let n = cross(sub(q3[2], q3[0]), sub(q3[3], q3[1]));
+                let l = norm(n);
+                if l < 1e-3 {
+                    continue;
+                }
+                [n[0] / l, n[1] / l, n[2] / l]
+            };
+            let len: [f32; 4] = std::array::from_fn(|e| norm(sub(q3[(e + 1) % 4], q3[e])));
+            let n_rel = 1 + (rng.f32() * 30.0) as usize;
+            let rel: Vec<[f32; 3]> = (0..n_rel)
+                .map(|_| match (rng.f32() * 4.0) as u32 {
+                    0 => q3[(rng.f32() * 4.0) as usize % 4],
+                    1 => {
+                        let (e, t) = ((rng.f32() * 4.0) as usize % 4, rng.f32());
+                        let (a, b) = (q3[e], q3[(e + 1) % 4]);
+                        std::array::from_fn(|k| a[k] + t * (b[k] - a[k]))
+                    }
+                    _ => std::array::from_fn(|_| rng.f32() * 2.4 - 1.2),
+                })
+                .collect();
+            // Three distinct slots (as a quad's corners are), some past the list's end.
+            let mut local = [0usize; 3];
+            for i in 0..3 {
+                local[i] = loop {
+                    let l = (rng.f32() * (n_rel as f32 + 2.0)) as usize;
+                    if !local[..i].contains(&l) {
+                        break l;
+                    }
+                };
+            }
+            let pre = Pre { quad: [0, 1, 2, 3], local, q3, normal, len, base: 0.0 };
+            let lbar = (len[0] + len[1] + len[2] + len[3]) / 4.0;
+            let centre: [f32; 3] = std::array::from_fn(|k| (q3[0][k] + q3[1][k] + q3[2][k] + q3[3][k]) / 4.0);
+            let en: Vec<[f32; 3]> = (0..4)
+                .map(|e| {
+                    let m = cross(normal, sub(q3[(e + 1) % 4], q3[e]));
+                    [m[0] / len[e], m[1] / len[e], m[2] / len[e]]
+                })
+                .collect();
+            let mut want = 0u16;
+            for (l, r) in rel.iter().enumerate() {
+                if local.contains(&(l + 1)) {
+                    continue;
+                }
+                if dot(sub(*r, centre), normal).abs() > cfg.inside_plane_tol * lbar {
+                    continue;
+                }
+                if (0..4).all(|e| dot(en[e], sub(*r, q3[e])) >= -cfg.inside_margin * lbar) {
+                    want += 1;
+                }
+            }
+            let got = inside_count(&pre, &rel, &cfg);
+            assert_eq!(got, want, "quad {q3:?} local {local:?} rel {rel:?}");
+            seen[usize::from(want).min(2)] += 1;
+        }
+        // Both empty and crowded quads occurred.
+        assert!(seen.iter().all(|&n| n > 100), "{seen:?}");
+    }
 
     fn grid(nx: usize, ny: usize, jitter: f32) -> Vec<[f32; 3]> {
         let mut rng = crate::rng::Rng::new(7);

@@ -9,7 +9,7 @@
 # (beside the hashed validation split), to judge a recipe on meshes it never saw; the
 # shipped weights use none (session 7's experiments used qm_monkey,qm_elephant,qm_feline).
 # Resumes from out/train/model.p2qm.ckpt if a run was interrupted.
-# Then 4 refinement rounds (`point2quad refine`, seed 0, a few minutes) on the same
+# Then 5 refinement rounds (`point2quad refine`, seed 0, a few minutes) on the same
 # data over the trained classifier; the refined weights are the shipped ones.
 set -euo pipefail
 BIN=${1:-target/release/point2quad}
@@ -29,6 +29,6 @@ HOLD=()
 START=(--config default --sign-free-normals)
 [ -f "$MODEL.ckpt" ] && START=(--resume "$MODEL.ckpt")
 "$BIN" train --data "$DATA" --out "$MODEL" --epochs "$EPOCHS" --seed 0 "${HOLD[@]}" "${START[@]}"
-"$BIN" refine --data "$DATA" --model "$MODEL" --out "$REFINED" --rounds 4 --seed 0 "${HOLD[@]}"
+"$BIN" refine --data "$DATA" --model "$MODEL" --out "$REFINED" --rounds 5 --seed 0 "${HOLD[@]}"
 cp "$REFINED" fixtures/point2quad-default.p2qm
 echo "train: weights copied to fixtures/point2quad-default.p2qm"

@@ -116,8 +116,10 @@ enum Sides {
     /// (q_i → q_{i+1}) of candidate c), and per slot the group of the reversed edge
     /// (`NONE` when no candidate has it).
     Direction { dir: Groups, rev_group: Vec<u32> },
-    /// [`SideRule::Normals`]: each candidate's [`quad_normal`].
-    Normals(Vec<[f32; 3]>),
+    /// [`SideRule::Normals`]: each candidate's [`quad_normal`], and per member of the
+    /// pair groups how that member holds the pair ([`EDGE_DIAGONAL`], [`EDGE_LO_HI`],
+    /// [`EDGE_HI_LO`]), so that a round's scan reads neither its corners nor diagonals.
+    Normals(Vec<[f32; 3]>, Vec<u8>),
 }
 
 /// How a refinement round decides which candidates sharing an edge lie on the same side
@@ -162,6 +164,13 @@ pub fn quad_normal(points: &[[f32; 3]], q: [u32; 4]) -> [f32; 3] {
 /// "No group" (a reversed edge no candidate has).
 const NONE: u32 = u32::MAX;
 
+/// A pair-group member that holds the pair as a diagonal.
+const EDGE_DIAGONAL: u8 = 0;
+/// ... as an edge running from the smaller point index to the larger.
+const EDGE_LO_HI: u8 = 1;
+/// ... as an edge running from the larger point index to the smaller.
+const EDGE_HI_LO: u8 = 2;
+
 /// Entries `(a, b, slot)` grouped by the pair (a, b): by a counting sort on `a`
 /// (points index below `n`), then a sort on (b, slot) within each point's bucket, so
 /// members of a group are in slot order.
@@ -169,6 +178,8 @@ const NONE: u32 = u32::MAX;
 struct Groups {
     /// Member candidates (`slot / per`), group after group.
     members: Vec<u32>,
+    /// Per member: `slot % per` (which of its candidate's entries it is).
+    member_part: Vec<u8>,
     /// Group starts in `members` (one more than the groups).
     start: Vec<u32>,
     /// Per slot: its group.
@@ -196,6 +207,7 @@ impl Groups {
             *c += 1;
         }
         let mut members = Vec::with_capacity(entries.len());
+        let mut member_part = Vec::with_capacity(entries.len());
         let mut start = Vec::new();
         let mut second = Vec::new();
         let mut of_slot = vec![0u32; entries.len()];
@@ -211,11 +223,12 @@ impl Groups {
                 }
                 of_slot[slot as usize] = (start.len() - 1) as u32;
                 members.push(slot / per);
+                member_part.push((slot % per) as u8);
             }
         }
         by_first.push(start.len() as u32);
         start.push(members.len() as u32);
-        Groups { members, start, of_slot, second, by_first }
+        Groups { members, member_part, start, of_slot, second, by_first }
     }
 
     /// The group of pair (a, b), `NONE` when no entry has it.
@@ -323,10 +336,23 @@ impl CandidateGraph {
                     quads.iter().flat_map(|q| (0..4).map(|i| dir.find(q[(i + 1) % 4], q[i]))).collect();
                 (Sides::Direction { dir, rev_group }, pairs)
             }
-            SideRule::Normals => (
-                Sides::Normals(crate::par::map(quads.len(), |c| quad_normal(points, quads[c]))),
-                Groups::new(n_points, &pairs, 6),
-            ),
+            SideRule::Normals => {
+                let pairs = Groups::new(n_points, &pairs, 6);
+                let tags = pairs
+                    .members
+                    .iter()
+                    .zip(&pairs.member_part)
+                    .map(|(&d, &j)| {
+                        let (q, j) = (quads[d as usize], usize::from(j));
+                        match j {
+                            4 | 5 => EDGE_DIAGONAL,
+                            _ if q[j] < q[(j + 1) % 4] => EDGE_LO_HI,
+                            _ => EDGE_HI_LO,
+                        }
+                    })
+                    .collect();
+                (Sides::Normals(crate::par::map(quads.len(), |c| quad_normal(points, quads[c])), tags), pairs)
+            }
         };
         let pts = if input == RefineInput::Flow { points.to_vec() } else { Vec::new() };
         Ok(CandidateGraph { quads: quads.to_vec(), n_points, input, pts, pairs, sides })
@@ -335,31 +361,40 @@ impl CandidateGraph {
     /// Under [`SideRule::Normals`]: the best rival and the best neighbour of candidate
     /// `c` on its edge `i` (and that neighbour; `NONE` when there is none), scanning the
     /// other candidates that hold that pair of points as an edge.
-    fn sides_by_normals(&self, nrm: &[[f32; 3]], probs: &[f32], c: usize, i: usize) -> (f32, f32, u32) {
+    fn sides_by_normals(
+        &self,
+        nrm: &[[f32; 3]],
+        tags: &[u8],
+        probs: &[f32],
+        c: usize,
+        i: usize,
+    ) -> (f32, f32, u32) {
         let q = self.quads[c];
         let (a, b) = (q[i], q[(i + 1) % 4]);
+        // How a member running the pair as c does (a → b) is tagged.
+        let same_way = if a < b { EDGE_LO_HI } else { EDGE_HI_LO };
         let g = self.pairs.of_slot[6 * c + i] as usize;
         let (mut rival, mut across, mut across_id) = (0.0f32, 0.0f32, NONE);
-        for &d in &self.pairs.members[self.pairs.start[g] as usize..self.pairs.start[g + 1] as usize] {
-            if d as usize == c {
+        let range = self.pairs.start[g] as usize..self.pairs.start[g + 1] as usize;
+        for (&d, &tag) in self.pairs.members[range.clone()].iter().zip(&tags[range]) {
+            // A member holding the pair as its diagonal is neither rival nor neighbour.
+            if tag == EDGE_DIAGONAL || d as usize == c {
                 continue;
             }
-            let qd = self.quads[d as usize];
-            let fwd = (0..4).any(|j| qd[j] == a && qd[(j + 1) % 4] == b);
-            let bwd = (0..4).any(|j| qd[j] == b && qd[(j + 1) % 4] == a);
+            let fwd = tag == same_way;
             let pd = probs[d as usize];
             let opp = opposite_normals(nrm[c], nrm[d as usize]);
-            if (fwd && !opp) || (bwd && opp) {
+            if fwd != opp {
                 rival = rival.max(pd);
-            }
-            if (bwd && !opp) || (fwd && opp) {
+            } else {
                 // Among equally probable neighbours the flow columns take the one whose
                 // cyclic order, started at its smallest corner, is smallest: the first
                 // of them in `candidates::generate`'s order, and independent of the
                 // order of the list.
                 let better = across_id == NONE
                     || pd > across
-                    || (pd == across && canonical(qd) < canonical(self.quads[across_id as usize]));
+                    || (pd == across
+                        && canonical(self.quads[d as usize]) < canonical(self.quads[across_id as usize]));
                 if better {
                     across = pd;
                     across_id = d;
@@ -430,7 +465,7 @@ impl CandidateGraph {
         }
         let dir_best = match &self.sides {
             Sides::Direction { dir, .. } => group_best(&dir.members, &dir.start, probs),
-            Sides::Normals(_) => Vec::new(),
+            Sides::Normals(..) => Vec::new(),
         };
         let pair = group_best(&self.pairs.members, &self.pairs.start, probs);
         let mut mass = vec![0.0f64; self.n_points];
@@ -460,7 +495,7 @@ impl CandidateGraph {
                             best_other(&dir_best, rev_group[4 * c + i], me),
                             NONE,
                         ),
-                        Sides::Normals(nrm) => self.sides_by_normals(nrm, probs, c, i),
+                        Sides::Normals(nrm, tags) => self.sides_by_normals(nrm, tags, probs, c, i),
                     };
                     if flow && nb != NONE {
                         let (f, r) = self.flow(c, i, nb);

@@ -893,7 +893,7 @@ fn inside_count(c: &Pre, rel: &[[f32; 3]], cfg: &CandidateConfig) -> u16 {
     let mut inside: u32 = rel.iter().map(|r| u32::from(passes(r))).sum();
     for &l in &c.local {
         if let Some(r) = l.checked_sub(1).and_then(|i| rel.get(i)) {
-            inside -= u32::from(passes(r));
+            inside = inside.saturating_sub(u32::from(passes(r)));
         }
     }
     inside.min(u32::from(u16::MAX)) as u16

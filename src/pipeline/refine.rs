@@ -712,7 +712,7 @@ impl Refiner {
 
     /// Round `r`'s probabilities from feature rows (inference; `standardised`: the rows
     /// went through [`Refiner::standardise`] already): the MLP row by row (equal to
-    /// [`Refiner::forward`] on standardised rows up to float rounding; a `[M × 27]`
+    /// [`Refiner::forward`] on standardised rows up to float rounding; an `[M × dim]`
     /// GEMM through the tape is slower than [`affine_row`] on rows kept in cache).
     fn round_probs(
         &self,

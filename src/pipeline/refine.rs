@@ -178,8 +178,6 @@ const EDGE_HI_LO: u8 = 2;
 struct Groups {
     /// Member candidates (`slot / per`), group after group.
     members: Vec<u32>,
-    /// Per member: `slot % per` (which of its candidate's entries it is).
-    member_part: Vec<u8>,
     /// Group starts in `members` (one more than the groups).
     start: Vec<u32>,
     /// Per slot: its group.
@@ -207,7 +205,6 @@ impl Groups {
             *c += 1;
         }
         let mut members = Vec::with_capacity(entries.len());
-        let mut member_part = Vec::with_capacity(entries.len());
         let mut start = Vec::new();
         let mut second = Vec::new();
         let mut of_slot = vec![0u32; entries.len()];
@@ -223,12 +220,11 @@ impl Groups {
                 }
                 of_slot[slot as usize] = (start.len() - 1) as u32;
                 members.push(slot / per);
-                member_part.push((slot % per) as u8);
             }
         }
         by_first.push(start.len() as u32);
         start.push(members.len() as u32);
-        Groups { members, member_part, start, of_slot, second, by_first }
+        Groups { members, start, of_slot, second, by_first }
     }
 
     /// The group of pair (a, b), `NONE` when no entry has it.
@@ -338,19 +334,18 @@ impl CandidateGraph {
             }
             SideRule::Normals => {
                 let pairs = Groups::new(n_points, &pairs, 6);
-                let tags = pairs
-                    .members
-                    .iter()
-                    .zip(&pairs.member_part)
-                    .map(|(&d, &j)| {
-                        let (q, j) = (quads[d as usize], usize::from(j));
-                        match j {
-                            4 | 5 => EDGE_DIAGONAL,
-                            _ if q[j] < q[(j + 1) % 4] => EDGE_LO_HI,
-                            _ => EDGE_HI_LO,
-                        }
-                    })
-                    .collect();
+                // Which of member d's pairs group g is: the slot of d that maps to g.
+                let mut tags = Vec::with_capacity(pairs.members.len());
+                for g in 0..pairs.start.len() - 1 {
+                    for &d in &pairs.members[pairs.start[g] as usize..pairs.start[g + 1] as usize] {
+                        let (q, d) = (quads[d as usize], d as usize);
+                        tags.push(match (0..6).position(|j| pairs.of_slot[6 * d + j] as usize == g) {
+                            Some(j) if j < 4 && q[j] < q[(j + 1) % 4] => EDGE_LO_HI,
+                            Some(j) if j < 4 => EDGE_HI_LO,
+                            _ => EDGE_DIAGONAL,
+                        });
+                    }
+                }
                 (Sides::Normals(crate::par::map(quads.len(), |c| quad_normal(points, quads[c])), tags), pairs)
             }
         };
@@ -724,32 +719,25 @@ impl Refiner {
         let round = &self.rounds[r];
         let mean = params.get(round.mean).data();
         let scale = params.get(round.scale).data();
+        let dim = self.input.dim();
+        let fits = round.layers.iter().all(|l| {
+            params.get(l.weight).data().len() == l.cin * l.cout
+                && l.bias.map_or(true, |b| params.get(b).data().len() == l.cout)
+        });
+        if round.layers.last().map(|l| l.cout) != Some(2) || feats.len() % dim != 0 || !fits {
+            return Err(Error::Shape { op: "refine", msg: "rows or last layer do not fit".into() });
+        }
         // Weights transposed once per call (`[cin × cout]`), for [`affine_row`].
         let layers: Vec<LayerRef> = round
             .layers
             .iter()
             .map(|l| {
-                let w = params.get(l.weight).data();
-                let (cin, cout) = (l.cin, l.cout);
-                let mut wt = vec![0.0f32; w.len()];
-                if w.len() == cin * cout {
-                    for k in 0..cout {
-                        for j in 0..cin {
-                            wt[j * cout + k] = w[k * cin + j];
-                        }
-                    }
-                }
+                let (w, cin, cout) = (params.get(l.weight).data(), l.cin, l.cout);
+                let wt = (0..cin * cout).map(|i| w[(i % cout) * cin + i / cout]).collect();
                 (wt, l.bias.map(|b| params.get(b).data()), cin, cout)
             })
             .collect();
-        let dim = self.input.dim();
         let width = layers.iter().map(|l| l.2.max(l.3)).max().unwrap_or(0).max(dim);
-        let fits = layers
-            .iter()
-            .all(|(wt, b, cin, cout)| wt.len() == cin * cout && b.map_or(true, |b| b.len() == *cout));
-        if layers.last().map(|l| l.3) != Some(2) || feats.len() % dim != 0 || !fits {
-            return Err(Error::Shape { op: "refine", msg: "rows or last layer do not fit".into() });
-        }
         const ROWS: usize = 512;
         let mut out = vec![0.0f32; feats.len() / dim];
         crate::par::for_each_chunk_mut(&mut out, ROWS, |ch, chunk| {

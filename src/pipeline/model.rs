@@ -165,6 +165,41 @@ impl ModelConfig {
             + if self.use_context { crate::pipeline::features::CONTEXT_DIM } else { 0 }
     }
 
+    /// A lower bound on the weights [`Model::new`] allocates for this config: the
+    /// products `c_in · c_out` of every convolution of the face encoder, the classifier
+    /// and the refinement rounds, and a bound per block of the point encoder (saturating,
+    /// so a forged width cannot overflow it). Every one of them is stored in a weights
+    /// file, so a file holding fewer values than this cannot be this config's
+    /// ([`Model::from_checkpoint`] checks it before allocating anything).
+    pub fn min_weights(&self) -> u64 {
+        let chain = |cin: usize, widths: &[usize], out: usize| -> u64 {
+            let mut total = 0u64;
+            let mut c = cin as u64;
+            for &w in widths.iter().chain(std::iter::once(&out)) {
+                total = total.saturating_add(c.saturating_mul(w as u64));
+                c = w as u64;
+            }
+            total
+        };
+        let w = &self.face_widths;
+        // The face encoder's five layers and its residual block's two w1 × w1 convs.
+        let face = chain(self.face_in(), &w[..4], w[4])
+            .saturating_add((w[1] as u64).saturating_mul(w[1] as u64).saturating_mul(2));
+        let cls_in = (w[4] as u64).saturating_add((self.point_dim as u64).saturating_mul(4));
+        let cls = chain(usize::try_from(cls_in).unwrap_or(usize::MAX), &self.classifier_widths, 2);
+        let round = chain(self.refine_input.dim(), &self.refine_widths, 2);
+        let rounds = round.saturating_mul(self.refine_rounds as u64);
+        // The point encoder: its first KPConv (K · f weights at least, f the first
+        // width) and, for every further block, a KPConv of at least f / 4 in and out
+        // features (K · (f / 4)² ≥ K · f / 4 weights, widths never falling below f).
+        let kp = self.point_encoder.as_ref().map_or(0, |k| {
+            let kf = (k.num_kernel_points as u64).saturating_mul(k.first_features_dim as u64);
+            let more = (k.blocks.len().saturating_sub(1) as u64).saturating_mul(kf / 4);
+            kf.saturating_add(more)
+        });
+        face.saturating_add(cls).saturating_add(rounds).saturating_add(kp)
+    }
+
     /// Checks the config's consistency.
     ///
     /// # Errors
@@ -776,6 +811,19 @@ impl Model {
             msg: "model config is not UTF-8".into(),
         })?;
         let config = ModelConfig::from_text(text, name).map_err(as_ckpt_err)?;
+        // Before anything is allocated: a config whose widths the stored tensors cannot
+        // hold (a damaged or forged file with a valid checksum) would otherwise ask for
+        // terabytes and abort the process.
+        let stored: u64 = ckpt.tensors.iter().map(|(_, t)| t.data().len() as u64).sum();
+        let needed = config.min_weights();
+        if needed > stored {
+            return Err(Error::Checkpoint {
+                path: name.to_path_buf(),
+                msg: format!(
+                    "model config asks for at least {needed} weights (its widths), but the file holds {stored} values"
+                ),
+            });
+        }
         let mut model = Model::new(config, 0).map_err(as_ckpt_err)?;
         ckpt.apply_to(&mut model.params, name)?;
         if let Some(kp) = &mut model.net.point {
@@ -1217,6 +1265,61 @@ mod tests {
         let back = Model::from_bytes(&bytes, Path::new("mem")).unwrap();
         assert_eq!(back.predict(&feats).unwrap(), p);
         assert!(Model::from_bytes(&bytes[..bytes.len() - 3], Path::new("mem")).is_err());
+    }
+
+    /// A weights file whose config asks for more than its tensors hold (a forged width
+    /// with the checksum redone) is refused before anything is allocated; every real
+    /// config's bound is within its own weights, so no valid file is refused.
+    #[test]
+    fn forged_widths_are_refused_before_allocation() {
+        for cfg in [
+            ModelConfig::default_preset(),
+            ModelConfig::default_kp(),
+            ModelConfig::paper(),
+            ModelConfig { refine_rounds: 3, refine_widths: vec![32, 16], ..ModelConfig::default_preset() },
+            ModelConfig {
+                refine_rounds: 5,
+                refine_widths: vec![32, 16],
+                refine_input: RefineInput::Flow,
+                refine_sides: SideRule::Normals,
+                ..ModelConfig::default_preset()
+            },
+        ] {
+            let model = Model::new(cfg.clone(), 0).unwrap();
+            let trainable = model.params.num_trainable() as u64;
+            assert!(
+                cfg.min_weights() <= trainable,
+                "{}: bound {} > {trainable}",
+                cfg.preset,
+                cfg.min_weights()
+            );
+            // The bound is not vacuous: without a point encoder it is most of the weights.
+            if cfg.point_encoder.is_none() {
+                let b = cfg.min_weights();
+                assert!(b * 10 >= trainable * 8, "{}: bound {b} ≪ {trainable}", cfg.preset);
+            }
+        }
+        let model = Model::new(
+            ModelConfig { refine_rounds: 2, refine_widths: vec![32, 16], ..ModelConfig::default_preset() },
+            0,
+        )
+        .unwrap();
+        let ckpt = model.to_checkpoint(None);
+        let text = String::from_utf8(ckpt.config.clone()).unwrap();
+        assert!(Model::from_checkpoint(&ckpt, Path::new("ok.p2qm")).is_ok());
+        for (old, new) in [
+            ("face_widths = 64,64,96,128,96", "face_widths = 64,64,96,128,4000000000"),
+            ("classifier_widths = 128,64,32", "classifier_widths = 128,64,18446744073709551615"),
+            ("refine_widths = 32,16", "refine_widths = 32,16000000000"),
+        ] {
+            assert!(text.contains(old), "{old:?} not in the config text");
+            let forged = Checkpoint { config: text.replace(old, new).into_bytes(), ..ckpt.clone() };
+            let bytes = forged.to_bytes();
+            let err =
+                Model::from_bytes(&bytes, Path::new("forged.p2qm")).err().expect("forged widths accepted");
+            let msg = err.to_string();
+            assert!(msg.contains("forged.p2qm") && msg.contains("asks for at least"), "{new}: {msg}");
+        }
     }
 
     #[test]

@@ -17,7 +17,8 @@ use std::io::Write;
 /// # Errors
 /// `Parse` naming `name` and the line for: a `v` line with fewer than 3 numbers, a
 /// bad or non-finite number, a face with fewer than 3 vertices, index 0, an index
-/// out of range or unparsable.
+/// out of range or unparsable (the face is named too), a texture or normal index
+/// that is not an integer (`2/x`), a corner with more than three parts.
 pub fn parse_obj(bytes: &[u8], name: &str) -> Result<PolyMesh> {
     parse_obj_with(bytes, name, true)
 }
@@ -26,8 +27,9 @@ pub fn parse_obj(bytes: &[u8], name: &str) -> Result<PolyMesh> {
 pub(crate) fn parse_obj_with(bytes: &[u8], name: &str, want_faces: bool) -> Result<PolyMesh> {
     let bytes = &*text::cr_lines(bytes);
     let mut mesh = PolyMesh::default();
-    // The largest positive (forward-resolvable) index seen and where, checked at the end.
-    let mut max_index: (u64, usize) = (0, 0);
+    // The largest positive (forward-resolvable) index seen, its line and its face,
+    // checked at the end.
+    let mut max_index: (u64, usize, usize) = (0, 0, 0);
     for (ln, raw) in Lines::new(bytes) {
         let mut toks = Tokens::commented(raw);
         let Some(key) = toks.next() else { continue };
@@ -55,6 +57,8 @@ pub(crate) fn parse_obj_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
                             format!("face {}: bad vertex index '{}'", mesh.faces.len(), show(tok)),
                         )
                     })?;
+                    check_corner_tail(tok)
+                        .map_err(|msg| Error::parse(name, ln, format!("face {}: {msg}", mesh.faces.len())))?;
                     let zero_based = match idx {
                         0 => {
                             return Err(Error::parse(
@@ -65,7 +69,7 @@ pub(crate) fn parse_obj_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
                         }
                         i if i > 0 => {
                             if i as u64 > max_index.0 {
-                                max_index = (i as u64, ln);
+                                max_index = (i as u64, ln, mesh.faces.len());
                             }
                             i - 1
                         }
@@ -100,10 +104,32 @@ pub(crate) fn parse_obj_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
         return Err(Error::parse(
             name,
             max_index.1,
-            format!("vertex index {} out of range (the file has {nv} vertices)", max_index.0),
+            format!(
+                "vertex index {} out of range in face {} (the file has {nv} vertices)",
+                max_index.0, max_index.2
+            ),
         ));
     }
     Ok(mesh)
+}
+
+/// Checks the texture and normal parts of a face corner `v/vt/vn` (`1/2/3`, `1//3`,
+/// `1/2`): each may be empty, a non-empty one must be an integer (negative counts
+/// back, as for vertices), and there are at most three parts. They are not used,
+/// but `2/x` is damage, not data. `Err` holds the reason.
+fn check_corner_tail(tok: &[u8]) -> std::result::Result<(), String> {
+    let mut parts = tok.split(|&b| b == b'/').skip(1);
+    for kind in ["texture", "normal"] {
+        match parts.next() {
+            None => return Ok(()),
+            Some(p) if p.is_empty() || parse_i64(p).is_some() => {}
+            Some(p) => return Err(format!("bad {kind} index '{}' in '{}'", show(p), show(tok))),
+        }
+    }
+    match parts.next() {
+        None => Ok(()),
+        Some(_) => Err(format!("'{}' has more than 3 parts (v/vt/vn)", show(tok))),
+    }
 }
 
 /// Writes `mesh` as OBJ (`v x y z` lines with round-trip-exact coordinates, then
@@ -157,7 +183,7 @@ mod tests {
     fn errors_name_file_and_line() {
         let cases: &[(&[u8], &str)] = &[
             (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 0\n", "t.obj:4: face 0: vertex index 0"),
-            (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "t.obj:4: vertex index 4 out of range"),
+            (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "t.obj:4: vertex index 4 out of range in face 0"),
             (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 -4\n", "t.obj:4: face 0: vertex index -4 out of range"),
             (b"v 0 0 0\nv 1 0 0\nf 1 2\n", "t.obj:3: face 0: has 2 vertices"),
             (b"v 0 0\n", "t.obj:1: vertex 0: needs 3 coordinates, found 2"),

@@ -1,8 +1,9 @@
 //! Stanford PLY: ascii, binary_little_endian and binary_big_endian. Reads the
 //! `vertex` element's x y z (any scalar type) and the `face` element's
 //! `vertex_indices` / `vertex_index` list (any integer types); every other property
-//! and element, list properties included, is skipped. Writes doubles, so
-//! coordinates round-trip exactly.
+//! and element, list properties included, is skipped (in ASCII its values are still
+//! checked against their declared types). Writes doubles, so coordinates round-trip
+//! exactly.
 
 use super::mesh_io::check_writable;
 use super::text::{self, out_err, parse_f64, parse_i64, show, Lines, Tokens};
@@ -63,6 +64,86 @@ impl Scalar {
         !matches!(self, Scalar::F32 | Scalar::F64)
     }
 
+    /// The type's name in the PLY specification, for messages.
+    fn name(self) -> &'static str {
+        match self {
+            Scalar::I8 => "char",
+            Scalar::U8 => "uchar",
+            Scalar::I16 => "short",
+            Scalar::U16 => "ushort",
+            Scalar::I32 => "int",
+            Scalar::U32 => "uint",
+            Scalar::F32 => "float",
+            Scalar::F64 => "double",
+        }
+    }
+
+    /// The smallest and largest value of an integer type; `None` for `float` and `double`.
+    fn int_bounds(self) -> Option<(i64, i64)> {
+        Some(match self {
+            Scalar::I8 => (i8::MIN.into(), i8::MAX.into()),
+            Scalar::U8 => (0, u8::MAX.into()),
+            Scalar::I16 => (i16::MIN.into(), i16::MAX.into()),
+            Scalar::U16 => (0, u16::MAX.into()),
+            Scalar::I32 => (i32::MIN.into(), i32::MAX.into()),
+            Scalar::U32 => (0, u32::MAX.into()),
+            Scalar::F32 | Scalar::F64 => return None,
+        })
+    }
+
+    /// The values the type holds, as a message fragment: `0 to 255`, or for `float`
+    /// and `double` the largest magnitude.
+    fn range_text(self) -> String {
+        match (self.int_bounds(), self) {
+            (Some((lo, hi)), _) => format!("{lo} to {hi}"),
+            (None, Scalar::F32) => format!("at most ±{:e}", f32::MAX),
+            (None, _) => format!("at most ±{:e}", f64::MAX),
+        }
+    }
+
+    /// Parses an ASCII value of this integer type: an integer within the type's range.
+    fn text_int(self, tok: &[u8]) -> std::result::Result<i64, Misfit> {
+        let (lo, hi) = self.int_bounds().unwrap_or((i64::MIN, i64::MAX));
+        match parse_i64(tok) {
+            Some(v) if (lo..=hi).contains(&v) => Ok(v),
+            Some(_) => Err(Misfit::OutOfRange),
+            None => {
+                let digits = tok.strip_prefix(b"-").or_else(|| tok.strip_prefix(b"+")).unwrap_or(tok);
+                if !digits.is_empty() && digits.iter().all(u8::is_ascii_digit) {
+                    Err(Misfit::OutOfRange) // beyond even i64
+                } else if parse_f64(tok).is_some() {
+                    Err(Misfit::NotAnInteger)
+                } else {
+                    Err(Misfit::NotANumber)
+                }
+            }
+        }
+    }
+
+    /// Parses an ASCII value of this type: an integer type takes an integer within its
+    /// range (see [`Scalar::text_int`]); `float` and `double` take a number that is
+    /// finite in that type (`1e39` is not a `float`). The words `nan` and `inf` pass,
+    /// as a binary file can hold them too: coordinates refuse them as non-finite.
+    /// The value is returned as written (a `float` is not rounded to f32).
+    fn text_real(self, tok: &[u8]) -> std::result::Result<f64, Misfit> {
+        if self.is_int() {
+            return self.text_int(tok).map(|v| v as f64);
+        }
+        let v = parse_f64(tok).ok_or(Misfit::NotANumber)?;
+        let fits = if v.is_finite() {
+            self == Scalar::F64 || (v as f32).is_finite()
+        } else {
+            // `inf`, `nan` (spelt out) rather than digits that overflowed (`1e400`).
+            let unsigned = tok.strip_prefix(b"-").or_else(|| tok.strip_prefix(b"+")).unwrap_or(tok);
+            unsigned.first().is_some_and(u8::is_ascii_alphabetic)
+        };
+        if fits {
+            Ok(v)
+        } else {
+            Err(Misfit::OutOfRange)
+        }
+    }
+
     /// Decodes one value from the first `size()` bytes of `b`.
     #[inline]
     fn read_f64(self, b: &[u8], big: bool) -> f64 {
@@ -93,6 +174,33 @@ impl Scalar {
     #[inline]
     fn read_i64(self, b: &[u8], big: bool) -> i64 {
         self.read_f64(b, big) as i64
+    }
+}
+
+/// Why an ASCII value does not fit its property's declared type.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Misfit {
+    /// Not a number at all (`x`, `1.2.3`).
+    NotANumber,
+    /// A number, but the type is an integer type (`0.7` for an `int`).
+    NotAnInteger,
+    /// Beyond the type's range (`300` for a `uchar`, `1e39` for a `float`).
+    OutOfRange,
+}
+
+impl Misfit {
+    /// The message for `tok`, a value of type `t` (`subject` names it: "property 'x'");
+    /// `bad` words a token that is no number at all (the callers' "bad number").
+    fn describe(self, t: Scalar, tok: &[u8], subject: &dyn std::fmt::Display, bad: &str) -> String {
+        match self {
+            Misfit::NotANumber => format!("{bad} '{}'", show(tok)),
+            Misfit::NotAnInteger => {
+                format!("{subject} is {}: '{}' is not an integer", t.name(), show(tok))
+            }
+            Misfit::OutOfRange => {
+                format!("{subject} is {}: '{}' is out of range ({})", t.name(), show(tok), t.range_text())
+            }
+        }
     }
 }
 
@@ -163,6 +271,13 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
         }
         match key {
             b"format" => {
+                if let Some((_, first)) = format {
+                    return Err(Error::parse(
+                        name,
+                        ln,
+                        format!("a second 'format' line (the first is on line {first})"),
+                    ));
+                }
                 let f = match t.next().unwrap_or(b"") {
                     b"ascii" => Format::Ascii,
                     b"binary_little_endian" => Format::Binary { big: false },
@@ -171,7 +286,24 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                         return Err(Error::parse(name, ln, format!("unknown PLY format '{}'", show(other))))
                     }
                 };
-                format = Some(f);
+                match t.next() {
+                    Some(b"1.0") => {}
+                    Some(v) => {
+                        return Err(Error::parse(
+                            name,
+                            ln,
+                            format!("unsupported PLY version '{}' (only 1.0 is defined)", show(v)),
+                        ))
+                    }
+                    None => {
+                        return Err(Error::parse(
+                            name,
+                            ln,
+                            "format line without a version (expected e.g. 'format ascii 1.0')",
+                        ))
+                    }
+                }
+                format = Some((f, ln));
             }
             b"comment" | b"obj_info" | b"" => {}
             b"element" => {
@@ -208,13 +340,26 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                     Kind::Scalar(scalar(ty)?)
                 };
                 let pn = t.next().ok_or_else(|| Error::parse(name, ln, "property without a name"))?;
-                el.props.push(Prop { name: String::from_utf8_lossy(pn).into_owned(), kind });
+                let pn = String::from_utf8_lossy(pn).into_owned();
+                // Readers would silently take the first one (or the last).
+                if el.props.iter().any(|p| p.name == pn) {
+                    return Err(Error::parse(
+                        name,
+                        ln,
+                        format!(
+                            "property '{}' declared twice in element '{}'",
+                            show(pn.as_bytes()),
+                            show(el.name.as_bytes())
+                        ),
+                    ));
+                }
+                el.props.push(Prop { name: pn, kind });
             }
             b"end_header" => break,
             other => return Err(Error::parse(name, ln, format!("unknown header line '{}'", show(other)))),
         }
     }
-    let format = format.ok_or_else(|| Error::parse(name, ln, "header has no 'format' line"))?;
+    let (format, _) = format.ok_or_else(|| Error::parse(name, ln, "header has no 'format' line"))?;
     Ok(Header { format, elements, data_start: pos, lines: ln })
 }
 
@@ -300,55 +445,99 @@ impl<'a> Cursor<'a> {
         matches!(self, Cursor::Binary { big: true, .. })
     }
 
-    /// One scalar as f64 (integers convert exactly).
-    fn real(&mut self, t: Scalar, name: &str, what: &dyn std::fmt::Display) -> Result<f64> {
+    /// One scalar of property `prop` as f64 (integers convert exactly). In ASCII the
+    /// value must fit the declared type (see [`Scalar::text_real`]).
+    fn real(&mut self, t: Scalar, name: &str, what: &dyn std::fmt::Display, prop: &str) -> Result<f64> {
         if let Cursor::Binary { .. } = self {
             let big = self.big();
             let b = self.take(t.size()).ok_or_else(|| eof(name, what))?;
             return Ok(t.read_f64(b, big));
         }
         let tok = self.next_token().ok_or_else(|| eof(name, what))?;
-        parse_f64(tok)
-            .ok_or_else(|| Error::parse(name, self.line(), format!("{what}: bad number '{}'", show(tok))))
+        t.text_real(tok).map_err(|m| {
+            let msg = m.describe(t, tok, &format_args!("property '{prop}'"), "bad number");
+            Error::parse(name, self.line(), format!("{what}: {msg}"))
+        })
     }
 
-    /// One integer.
-    fn int(&mut self, t: Scalar, name: &str, what: &dyn std::fmt::Display) -> Result<i64> {
+    /// One integer of property `prop`; in ASCII within the declared type's range.
+    fn int(&mut self, t: Scalar, name: &str, what: &dyn std::fmt::Display, prop: &str) -> Result<i64> {
         if let Cursor::Binary { .. } = self {
             let big = self.big();
             let b = self.take(t.size()).ok_or_else(|| eof(name, what))?;
             return Ok(t.read_i64(b, big));
         }
         let tok = self.next_token().ok_or_else(|| eof(name, what))?;
-        parse_i64(tok)
-            .ok_or_else(|| Error::parse(name, self.line(), format!("{what}: bad integer '{}'", show(tok))))
+        t.text_int(tok).map_err(|m| {
+            let msg = m.describe(t, tok, &format_args!("property '{prop}'"), "bad integer");
+            Error::parse(name, self.line(), format!("{what}: {msg}"))
+        })
     }
 
-    /// Skips `n` values of type `t`.
-    fn skip(&mut self, t: Scalar, n: usize, name: &str, what: &dyn std::fmt::Display) -> Result<()> {
+    /// Skips `n` values of type `t` (of property `prop`). In ASCII each must still
+    /// fit the type: a `uchar` colour of 300 is as wrong as a coordinate would be.
+    fn skip(
+        &mut self,
+        t: Scalar,
+        n: usize,
+        name: &str,
+        what: &dyn std::fmt::Display,
+        prop: &str,
+    ) -> Result<()> {
         if let Cursor::Binary { .. } = self {
             let bytes = n.checked_mul(t.size()).ok_or_else(|| eof(name, what))?;
             return self.take(bytes).map(|_| ()).ok_or_else(|| eof(name, what));
         }
         for _ in 0..n {
-            self.next_token().ok_or_else(|| eof(name, what))?;
+            let tok = self.next_token().ok_or_else(|| eof(name, what))?;
+            t.text_real(tok).map_err(|m| {
+                let bad = if t.is_int() { "bad integer" } else { "bad number" };
+                let msg = m.describe(
+                    t,
+                    tok,
+                    &format_args!("property '{prop}'"),
+                    &format!("property '{prop}': {bad}"),
+                );
+                Error::parse(name, self.line(), format!("{what}: {msg}"))
+            })?;
         }
         Ok(())
     }
 
     /// Skips one property value (a list's count and items).
-    fn skip_prop(&mut self, k: Kind, name: &str, what: &dyn std::fmt::Display) -> Result<()> {
-        match k {
-            Kind::Scalar(s) => self.skip(s, 1, name, what),
+    fn skip_prop(&mut self, p: &Prop, name: &str, what: &dyn std::fmt::Display) -> Result<()> {
+        match p.kind {
+            Kind::Scalar(s) => self.skip(s, 1, name, what, &p.name),
             Kind::List { count, item } => {
-                let n = self.list_len(count, name, what)?;
-                self.skip(item, n, name, what)
+                let n = self.list_len(count, name, what, &p.name)?;
+                self.skip(item, n, name, what, &p.name)
             }
         }
     }
 
-    fn list_len(&mut self, count: Scalar, name: &str, what: &dyn std::fmt::Display) -> Result<usize> {
-        let n = self.int(count, name, what)?;
+    /// The length of a list property `prop`: not negative, and in ASCII within the
+    /// count type's range (a `uchar` count of 300 is not a count).
+    fn list_len(
+        &mut self,
+        count: Scalar,
+        name: &str,
+        what: &dyn std::fmt::Display,
+        prop: &str,
+    ) -> Result<usize> {
+        let n = match self {
+            Cursor::Binary { .. } => self.int(count, name, what, prop)?,
+            Cursor::Ascii { .. } => {
+                let tok = self.next_token().ok_or_else(|| eof(name, what))?;
+                match parse_i64(tok) {
+                    Some(n) if n < 0 => n,
+                    _ => count.text_int(tok).map_err(|m| {
+                        let subject = format!("the list count of property '{prop}'");
+                        let msg = m.describe(count, tok, &subject, "bad integer");
+                        Error::parse(name, self.line(), format!("{what}: {msg}"))
+                    })?,
+                }
+            }
+        };
         usize::try_from(n)
             .map_err(|_| Error::parse(name, self.line(), format!("{what}: negative list length {n}")))
     }
@@ -360,10 +549,13 @@ impl<'a> Cursor<'a> {
 ///
 /// # Errors
 /// `Parse` naming `name` and the header line or the element (`vertex 12`, with the
-/// line for ASCII) for: a malformed header or unknown format, a vertex element
-/// without scalar x, y and z, a face element without a `vertex_indices` list, a bad
-/// or non-finite number, a face with fewer than 3 vertices, an index out of range,
-/// a body shorter or longer than the header declares.
+/// line for ASCII) for: a malformed header, an unknown format, a version other than
+/// 1.0, a second `format` line, a property declared twice in one element, a vertex
+/// element without scalar x, y and z, a face element without a `vertex_indices`
+/// list, a bad or non-finite number, an ASCII value that does not fit its
+/// property's declared type (naming the property: `uchar 300`, `int 0.7`, `float
+/// 1e39`; list counts and indices included), a face with fewer than 3 vertices, an
+/// index out of range, a body shorter or longer than the header declares.
 pub fn parse_ply(bytes: &[u8], name: &str) -> Result<PolyMesh> {
     parse_ply_with(bytes, name, true)
 }
@@ -411,7 +603,7 @@ pub(crate) fn parse_ply_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
                 for i in 0..el.count {
                     let what = format_args!("{} {i} of {} declared", el.name, el.count);
                     for p in &el.props {
-                        cur.skip_prop(p.kind, name, &what)?;
+                        cur.skip_prop(p, name, &what)?;
                     }
                     cur.end_item(name, &what)?;
                 }
@@ -523,7 +715,7 @@ fn read_vertices(
         for (k, prop) in el.props.iter().enumerate() {
             match prop.kind {
                 Kind::Scalar(s) if axis_prop.contains(&k) => {
-                    let v = cur.real(s, name, &what)?;
+                    let v = cur.real(s, name, &what, &prop.name)?;
                     line = cur.line();
                     for a in 0..3 {
                         if axis_prop[a] == k {
@@ -531,7 +723,7 @@ fn read_vertices(
                         }
                     }
                 }
-                kind => cur.skip_prop(kind, name, &what)?,
+                _ => cur.skip_prop(prop, name, &what)?,
             }
         }
         cur.end_item(name, &what)?;
@@ -564,10 +756,10 @@ fn read_faces(
         let what = format_args!("face {i} of {} declared", el.count);
         for (k, prop) in el.props.iter().enumerate() {
             if k != idx_prop {
-                cur.skip_prop(prop.kind, name, &what)?;
+                cur.skip_prop(prop, name, &what)?;
                 continue;
             }
-            let n = cur.list_len(ct, name, &what)?;
+            let n = cur.list_len(ct, name, &what, &prop.name)?;
             let line = cur.line();
             if n < 3 {
                 return Err(Error::parse(
@@ -578,7 +770,7 @@ fn read_faces(
             }
             let mut face = Vec::with_capacity(n.min(64));
             for _ in 0..n {
-                let v = cur.int(it, name, &what)?;
+                let v = cur.int(it, name, &what, &prop.name)?;
                 let ok = v >= 0 && v <= i64::from(u32::MAX) && nv.map_or(true, |nv| (v as u64) < nv as u64);
                 if !ok {
                     let line = cur.line();

@@ -55,18 +55,22 @@ pub fn read_points(path: &Path) -> Result<Vec<[f64; 3]>> {
 
 /// Parses a point cloud held in memory; `name` stands for the file in error messages.
 ///
-/// `.xyz`: one point per line, columns separated by whitespace and/or commas; `#`
+/// `.xyz`: one point per line, columns separated by whitespace or by commas (with or
+/// without spaces around them); `#`
 /// starts a comment; blank lines are skipped; columns after the third (normals,
 /// colours…) are ignored. A first data line holding a single integer is a point
 /// count (the `.pts` convention) and must match the number of points. A first data
 /// line of at least 3 column names (each starting with a letter or `_`, none of them a
-/// number, so `nan` or `inf` are not names) is a CSV-style header and is skipped. For mesh
+/// number, so `nan` or `inf` are not names) is a CSV-style header and is skipped. A data
+/// line that mixes the two separators, `1,5 2,5 3,5` (decimal commas), is an error,
+/// not the point (1, 5, 2). For mesh
 /// formats only the vertices are taken (faces are not read, except that PLY
 /// still checks every element's length).
 ///
 /// # Errors
 /// `Parse` naming `name` and the line (or, in binary PLY, the vertex) for a line
-/// with fewer than 3 columns, a bad or non-finite number, any error of the mesh
+/// with fewer than 3 columns, a bad or non-finite number, a line that looks like
+/// decimal commas (comma and whitespace separators mixed), any error of the mesh
 /// format's parser, and when the file holds no points.
 pub fn parse_points(bytes: &[u8], format: PointFormat, name: &str) -> Result<Vec<[f64; 3]>> {
     let points = match format {
@@ -112,6 +116,17 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
             }
         }
         let i = points.len();
+        if let Some(data) = decimal_comma_line(raw) {
+            return Err(Error::parse(
+                name,
+                ln,
+                format!(
+                    "point {i}: '{}' looks like decimal commas (commas and spaces both separate \
+                     its values); write decimals with a '.' (1.5, not 1,5)",
+                    show(data)
+                ),
+            ));
+        }
         let mut p = [0.0; 3];
         p[0] = coord(t0, name, ln, &format_args!("point {i}"))?;
         for (axis, c) in p.iter_mut().enumerate().skip(1) {
@@ -132,6 +147,29 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
         }
     }
     Ok(points)
+}
+
+/// The data of `line` (without its `#` comment, trimmed) when it mixes the two column
+/// separators: it has commas, and a comma-separated field, trimmed, still holds
+/// whitespace. That is the mark of decimal commas, `1,5 2,5 3,5`, which read as
+/// commas-and-spaces columns gives the point (1, 5, 2), silently. Plain CSV, with or
+/// without spaces after the commas (`1.0, 2.0, 3.0`), never mixes them.
+fn decimal_comma_line(line: &[u8]) -> Option<&[u8]> {
+    text::find_byte(line, b',')?;
+    let data = match text::find_byte(line, b'#') {
+        Some(i) => &line[..i],
+        None => line,
+    };
+    text::find_byte(data, b',')?;
+    let mixed = data.split(|&b| b == b',').any(|f| trim_space(f).iter().any(|&b| text::is_space(b)));
+    mixed.then(|| trim_space(data))
+}
+
+/// `f` without leading and trailing whitespace.
+fn trim_space(f: &[u8]) -> &[u8] {
+    let start = f.iter().position(|&b| !text::is_space(b)).unwrap_or(f.len());
+    let end = f.iter().rposition(|&b| !text::is_space(b)).map_or(start, |e| e + 1);
+    &f[start..end]
 }
 
 /// A line of at least 3 column names, `x,y,z`, `"x","y","z"` or `X Y Z nx ny nz`: every

@@ -4,6 +4,10 @@
 
 use crate::error::{Error, Result};
 
+/// The smallest radius [`Frame::fit`] accepts, in f64 steps (`f64::EPSILON` times the
+/// largest coordinate magnitude): below it the points' positions are mostly rounding.
+pub const MIN_EXTENT_STEPS: f64 = 64.0;
+
 /// A similarity transform `local = (world − center) / scale`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Frame {
@@ -59,13 +63,18 @@ impl Frame {
         }
         let radius =
             points.iter().map(|p| crate::math::dist_sq(unit(p), centroid)).fold(0.0f64, f64::max).sqrt();
-        // An extent at the level of f64 rounding of the coordinates is no extent: the
-        // local coordinates would be pure rounding noise.
-        if radius <= 1e-12 {
+        // An extent of a few f64 steps of the coordinates is no extent: the local
+        // coordinates would be rounding noise. The bound is [`MIN_EXTENT_STEPS`] steps
+        // (a step is `f64::EPSILON · mag` here, within 2× of the true spacing of the
+        // largest coordinate); it used to be 1e-12 · mag, which refused a unit grid
+        // offset by 1e13 although its points sit 500 steps apart.
+        if radius <= MIN_EXTENT_STEPS * f64::EPSILON {
             return Err(Error::invalid(format!(
                 "degenerate point cloud: its extent ({:.3e}) is below the f64 resolution of its \
-                 coordinates (up to {mag:.3e}); subtract the common offset first",
-                radius * mag
+                 coordinates (up to {mag:.3e}, in steps of about {:.1e}; at least {MIN_EXTENT_STEPS} \
+                 steps are needed); subtract the common offset first",
+                radius * mag,
+                f64::EPSILON * mag
             )));
         }
         let center = centroid.map(|c| c * mag);
@@ -194,9 +203,25 @@ mod tests {
         let offset: Vec<[f64; 3]> = lattice().iter().map(|p| [p[0] + 1e15, p[1], p[2]]).collect();
         let e = err(&offset);
         assert!(e.contains("f64 resolution") && e.contains("1.000e15"), "{e}");
-        // 1e12 is fine (DESIGN: any scale, pose or offset that f64 resolves).
-        let ok: Vec<[f64; 3]> = lattice().iter().map(|p| [p[0] + 1e12, p[1] - 1e12, p[2]]).collect();
-        assert!(Frame::fit(&ok).is_ok());
+        // 1e12 is fine (DESIGN: any scale, pose or offset that f64 resolves), and so are
+        // 1e13 and 1e14 (refused before session 20): the lattice's coordinates are
+        // multiples of 1/4, exact at those offsets, so the local frame is the one without
+        // the offset up to a similarity (the centroid and radius are rounded at the
+        // offset's magnitude): the same differences between points, relative to the
+        // largest of them.
+        let shape = |l: &[[f32; 3]]| -> Vec<[f32; 3]> {
+            let d: Vec<[f32; 3]> = l.iter().map(|p| std::array::from_fn(|a| p[a] - l[0][a])).collect();
+            let big = d.iter().map(|v| v.iter().map(|c| c * c).sum::<f32>().sqrt()).fold(0.0, f32::max);
+            d.iter().map(|v| v.map(|c| c / big)).collect()
+        };
+        let local = shape(&Frame::fit(&lattice()).unwrap().to_local_all(&lattice()));
+        for off in [1e12, 1e13, 1e14] {
+            let ok: Vec<[f64; 3]> = lattice().iter().map(|p| [p[0] + off, p[1] - off, p[2]]).collect();
+            let f = Frame::fit(&ok).unwrap_or_else(|e| panic!("offset {off:e}: {e}"));
+            for (a, b) in shape(&f.to_local_all(&ok)).iter().zip(&local) {
+                assert!(a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-5), "offset {off:e}: {a:?} vs {b:?}");
+            }
+        }
         let far = [[f64::MAX, 0.0, 0.0], [-f64::MAX, 0.0, 0.0], [0.0, f64::MAX, 0.0], [0.0, 0.0, -f64::MAX]];
         assert!(err(&far).contains("overflows"), "{}", err(&far));
     }

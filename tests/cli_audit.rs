@@ -489,3 +489,57 @@ fn training_without_validation_says_so() {
     assert!(err.contains("no validation samples") && !err.contains("validation precision"), "{err}");
     assert!(std::path::Path::new(&out).exists());
 }
+
+/// Session 20's audit: `candidates` ran on the raw cloud while `reconstruct` cleaned it
+/// first, so a grid with a point at 1e30 gave no candidate at all, and a grid with
+/// copies gave candidates over the copies. Both now see the cleaned cloud: the
+/// candidates are the grid's own, in input indices, and the notes name what was left out.
+#[test]
+fn candidates_see_the_cloud_reconstruct_sees() {
+    let dir = Scratch::new("audit20_cand");
+    let grid: Vec<[f64; 3]> = (0..400).map(|i| [(i % 20) as f64, (i / 20) as f64, 0.0]).collect();
+    let clean = dir.write("g.xyz", &xyz(&grid));
+    let txt = dir.p("g.txt");
+    assert_ok(&p2q(&["candidates", &clean, "-o", &txt]), "grid");
+    let want = std::fs::read_to_string(&txt).expect("test: read");
+    assert!(want.lines().count() > 300, "{}", want.lines().count());
+    let mut far = grid.clone();
+    far.push([1e30, 0.0, 0.0]);
+    let far = dir.write("far.xyz", &xyz(&far));
+    let err = assert_ok(&p2q(&["candidates", &far, "-o", &txt]), "grid + outlier");
+    assert!(err.contains("1 far outlier(s) left out") && err.contains("point 400 "), "{err}");
+    assert_eq!(std::fs::read_to_string(&txt).expect("test: read"), want, "grid + outlier");
+    let mut twice = grid.clone();
+    twice.extend(grid.iter());
+    let twice = dir.write("twice.xyz", &xyz(&twice));
+    let err = assert_ok(&p2q(&["candidates", &twice, "-o", &txt]), "grid twice");
+    assert!(err.contains("400 duplicate or near-duplicate point(s) counted once"), "{err}");
+    assert_eq!(std::fs::read_to_string(&txt).expect("test: read"), want, "grid twice");
+}
+
+/// Session 20's audit: two unit grids 1e9 apart collapse in the f32 normalised frame
+/// (every point merged as a "near-duplicate", no face). The cloud cannot be processed
+/// in one frame, and the CLI now says so, naming the file; a near-copy of a grid
+/// (merged on purpose) and the grid itself get no such warning.
+#[test]
+fn a_cloud_beyond_f32_resolution_is_named() {
+    let dir = Scratch::new("audit20_scale");
+    let grid: Vec<[f64; 3]> = (0..144).map(|i| [(i % 12) as f64, (i / 12) as f64, 0.0]).collect();
+    let out = dir.p("o.obj");
+    let mut apart = grid.clone();
+    apart.extend(grid.iter().map(|p| [p[0] + 1e9, p[1], p[2]]));
+    let apart = dir.write("apart.xyz", &xyz(&apart));
+    let err = assert_ok(&p2q(&["reconstruct", &apart, "-o", &out]), "two grids 1e9 apart");
+    assert!(
+        err.contains("closer together than the normalised frame resolves") && err.contains("apart.xyz"),
+        "{err}"
+    );
+    let mut near = grid.clone();
+    near.extend(grid.iter().map(|p| [p[0] + 1e-7, p[1], p[2]]));
+    for (name, pts) in [("grid", &grid), ("near copy", &near)] {
+        let f = dir.write("c.xyz", &xyz(pts));
+        let err = assert_ok(&p2q(&["reconstruct", &f, "-o", &out]), name);
+        assert!(!err.contains("normalised frame resolves"), "{name}: {err}");
+        assert_eq!(faces(&out).len(), 121, "{name}");
+    }
+}

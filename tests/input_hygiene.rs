@@ -379,3 +379,34 @@ fn any_config_gives_a_valid_mesh_or_an_error() {
     // Both outcomes occur, so the test exercises both paths.
     assert!(ok > 25 && err > 5, "ok {ok}, err {err}");
 }
+
+/// `prepare_cloud`'s unresolved count (session 20): points whose 8 nearest neighbours
+/// the f32 frame cannot separate. Two unit grids 1e9 apart: all of them; the grid alone,
+/// the grid at 1e-200 or 1e200, and the grid with a near-copy: none.
+#[test]
+fn unresolved_points_are_those_below_the_frames_resolution() {
+    use point2quad::pipeline::reconstruct::prepare_cloud;
+    let grid: Vec<[f64; 3]> = (0..144).map(|i| [(i % 12) as f64, (i / 12) as f64, 0.0]).collect();
+    let share = ReconstructConfig::default().merge_share;
+    for k in [1.0, 1e-200, 1e200] {
+        let g: Vec<[f64; 3]> = grid.iter().map(|p| p.map(|c| c * k)).collect();
+        let p = prepare_cloud(&g, share).unwrap();
+        assert_eq!((p.unresolved, p.first_unresolved, p.duplicates), (0, None, 0), "scale {k:e}");
+    }
+    let mut near = grid.clone();
+    near.extend(grid.iter().map(|p| [p[0] + 1e-7, p[1], p[2]]));
+    let p = prepare_cloud(&near, share).unwrap();
+    assert_eq!((p.unresolved, p.duplicates, p.distinct.len()), (0, 144, 144));
+    for gap in [1e8, 1e9] {
+        let mut apart = grid.clone();
+        apart.extend(grid.iter().map(|p| [p[0] + gap, p[1], p[2]]));
+        let p = prepare_cloud(&apart, share).unwrap();
+        assert_eq!((p.unresolved, p.first_unresolved), (288, Some(0)), "gap {gap:e}");
+    }
+    // 1e5 apart, a spacing is 2e-5 of the radius, about 170 f32 steps: resolved.
+    let mut apart = grid.clone();
+    apart.extend(grid.iter().map(|p| [p[0] + 1e5, p[1], p[2]]));
+    let p = prepare_cloud(&apart, share).unwrap();
+    assert_eq!((p.unresolved, p.duplicates), (0, 0));
+    assert!(prepare_cloud(&grid, 0.6).is_err());
+}

@@ -77,6 +77,10 @@ pub struct ReconstructReport {
     pub outliers: usize,
     /// The first far outlier's index in the input, if any.
     pub first_outlier: Option<usize>,
+    /// Points the normalised frame cannot resolve ([`PreparedCloud::unresolved`]).
+    pub unresolved: usize,
+    /// The first of them (input index), if any.
+    pub first_unresolved: Option<usize>,
     /// (stage, seconds), in pipeline order.
     pub timings: Vec<(&'static str, f64)>,
 }
@@ -142,51 +146,22 @@ pub fn reconstruct_ensemble_with_report(
     crate::pipeline::candidates::check_neighbour_counts(&cfg.candidates)?;
     let mut report = ReconstructReport { points: points.len(), ..Default::default() };
     let mut clock = Clock::new();
-    // Validate the cloud as given (errors name input indices), then work on its
-    // distinct points: exact duplicates fill the k nearest neighbours with copies
-    // (5 copies of each point left a k = 20 search 4 distinct neighbours, and half the
-    // faces of a cube were lost) and add nothing to the surface.
-    Frame::fit(points)?;
-    let mut distinct = distinct_points(points);
-    let too_few = |u: usize| {
-        Error::invalid(format!(
-            "point cloud has {u} distinct point(s) (of {}); at least 4 are needed for a quad",
-            points.len()
-        ))
-    };
-    if distinct.len() < 4 {
-        return Err(too_few(distinct.len()));
-    }
-    // Far outliers (a stray point 1e10 away) would squeeze the rest of the cloud into
-    // a speck of the normalised frame, below f32 resolution: left out.
-    let far = far_outliers(&distinct.iter().map(|&i| points[i as usize]).collect::<Vec<_>>());
-    if !far.is_empty() {
-        report.outliers = far.len();
-        report.first_outlier = far.iter().map(|&j| distinct[j] as usize).min();
-        let mut out = vec![false; distinct.len()];
-        far.iter().for_each(|&j| out[j] = true);
-        distinct = distinct.iter().zip(&out).filter(|(_, &o)| !o).map(|(&i, _)| i).collect();
-        if distinct.len() < 4 {
-            return Err(too_few(distinct.len()));
-        }
-    }
-    let mut uniq: Vec<[f64; 3]> = distinct.iter().map(|&i| points[i as usize]).collect();
-    let mut frame = Frame::fit(&uniq)?;
-    let mut local = frame.to_local_all(&uniq);
-    if cfg.merge_share > 0.0 {
-        let roots = near_duplicate_roots(&local, cfg.merge_share);
-        if roots.iter().enumerate().any(|(i, &r)| r as usize != i) {
-            let keep: Vec<usize> = (0..roots.len()).filter(|&i| roots[i] as usize == i).collect();
-            if keep.len() < 4 {
-                return Err(too_few(keep.len()));
-            }
-            distinct = keep.iter().map(|&i| distinct[i]).collect();
-            uniq = distinct.iter().map(|&i| points[i as usize]).collect();
-            frame = Frame::fit(&uniq)?;
-            local = frame.to_local_all(&uniq);
-        }
-    }
-    report.duplicates = points.len() - distinct.len() - report.outliers;
+    let PreparedCloud {
+        distinct,
+        uniq,
+        frame,
+        local,
+        duplicates,
+        outliers,
+        first_outlier,
+        unresolved,
+        first_unresolved,
+    } = prepare_cloud(points, cfg.merge_share)?;
+    report.duplicates = duplicates;
+    report.outliers = outliers;
+    report.first_outlier = first_outlier;
+    report.unresolved = unresolved;
+    report.first_unresolved = first_unresolved;
     clock.lap(&mut report, "normalise");
     let cands = generate(&local, &cfg.candidates)?;
     report.candidates = cands.len();
@@ -281,6 +256,113 @@ pub fn reconstruct_ensemble_with_report(
     Ok((mesh, report))
 }
 
+/// A cloud made ready for the pipeline by [`prepare_cloud`].
+#[derive(Clone, Debug)]
+pub struct PreparedCloud {
+    /// Input index of each point the pipeline works on (the first of each group of
+    /// duplicates or near-duplicates; far outliers left out), in input order.
+    pub distinct: Vec<u32>,
+    /// Those points, as given.
+    pub uniq: Vec<[f64; 3]>,
+    /// The normalising frame fitted to them.
+    pub frame: Frame,
+    /// Those points in the frame (f32, what candidates and the network read).
+    pub local: Vec<[f32; 3]>,
+    /// Input points left out as exact or near duplicates of an earlier one.
+    pub duplicates: usize,
+    /// Input points left out as far outliers ([`far_outliers`]).
+    pub outliers: usize,
+    /// The first far outlier's input index.
+    pub first_outlier: Option<usize>,
+    /// Distinct points whose whole neighbourhood the normalised frame cannot resolve:
+    /// their 8 nearest other points lie within [`UNRESOLVED_SHARE`] of the frame's
+    /// radius, i.e. at the f32 resolution every later stage works in. A cloud that
+    /// spans too many orders of magnitude (two objects 1e9 apart, a few points at 1e30
+    /// beside a unit-sized bulk) has such points: its small parts collapse (and are
+    /// merged as near-duplicates), and their faces are lost.
+    pub unresolved: usize,
+    /// The first such point's input index.
+    pub first_unresolved: Option<usize>,
+}
+
+/// A point whose 8 nearest other points all lie closer than this share of the frame's
+/// radius is "unresolved" ([`PreparedCloud::unresolved`]): 2⁻²⁰, 16 f32 steps at the
+/// radius.
+pub const UNRESOLVED_SHARE: f64 = 1.0 / 1048576.0;
+
+/// The input hygiene [`reconstruct`] (and the CLI's `candidates`) run before any work:
+/// validates the cloud as given (errors name input indices), counts exact duplicates
+/// once, leaves far outliers out, fits the normalising frame and merges near-duplicates
+/// (`merge_share`, see [`ReconstructConfig::merge_share`]; 0: exact duplicates only).
+///
+/// # Errors
+/// `InvalidInput` as [`Frame::fit`], for fewer than 4 distinct points, or a merge share
+/// outside [0, 0.5].
+pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCloud> {
+    if !(merge_share >= 0.0 && merge_share <= 0.5) {
+        return Err(Error::invalid(format!("merge share {merge_share} must be in [0, 0.5]")));
+    }
+    // Validate the cloud as given (errors name input indices), then work on its
+    // distinct points: exact duplicates fill the k nearest neighbours with copies
+    // (5 copies of each point left a k = 20 search 4 distinct neighbours, and half the
+    // faces of a cube were lost) and add nothing to the surface.
+    Frame::fit(points)?;
+    let mut distinct = distinct_points(points);
+    let too_few = |u: usize| {
+        Error::invalid(format!(
+            "point cloud has {u} distinct point(s) (of {}); at least 4 are needed for a quad",
+            points.len()
+        ))
+    };
+    if distinct.len() < 4 {
+        return Err(too_few(distinct.len()));
+    }
+    // Far outliers (a stray point 1e10 away) would squeeze the rest of the cloud into
+    // a speck of the normalised frame, below f32 resolution: left out.
+    let far = far_outliers(&distinct.iter().map(|&i| points[i as usize]).collect::<Vec<_>>());
+    let (outliers, first_outlier) = (far.len(), far.iter().map(|&j| distinct[j] as usize).min());
+    if !far.is_empty() {
+        let mut out = vec![false; distinct.len()];
+        far.iter().for_each(|&j| out[j] = true);
+        distinct = distinct.iter().zip(&out).filter(|(_, &o)| !o).map(|(&i, _)| i).collect();
+        if distinct.len() < 4 {
+            return Err(too_few(distinct.len()));
+        }
+    }
+    let mut uniq: Vec<[f64; 3]> = distinct.iter().map(|&i| points[i as usize]).collect();
+    let mut frame = Frame::fit(&uniq)?;
+    let mut local = frame.to_local_all(&uniq);
+    let knn = crate::pipeline::candidates::knn_table(&local, NEAR_K);
+    let reach = reach_of(&knn, local.len());
+    let lost: Vec<usize> = (0..local.len()).filter(|&i| (reach[i] as f64) < UNRESOLVED_SHARE).collect();
+    let (unresolved, first_unresolved) = (lost.len(), lost.iter().map(|&i| distinct[i] as usize).min());
+    if merge_share > 0.0 {
+        let roots = near_duplicate_roots_with(&knn, &reach, merge_share);
+        if roots.iter().enumerate().any(|(i, &r)| r as usize != i) {
+            let keep: Vec<usize> = (0..roots.len()).filter(|&i| roots[i] as usize == i).collect();
+            if keep.len() < 4 {
+                return Err(too_few(keep.len()));
+            }
+            distinct = keep.iter().map(|&i| distinct[i]).collect();
+            uniq = distinct.iter().map(|&i| points[i as usize]).collect();
+            frame = Frame::fit(&uniq)?;
+            local = frame.to_local_all(&uniq);
+        }
+    }
+    let duplicates = points.len() - distinct.len() - outliers;
+    Ok(PreparedCloud {
+        distinct,
+        uniq,
+        frame,
+        local,
+        duplicates,
+        outliers,
+        first_outlier,
+        unresolved,
+        first_unresolved,
+    })
+}
+
 /// A model whose output is not a probability (NaN or infinite: diverged or damaged
 /// weights) is the model's fault, not the cloud's: `Error::Checkpoint` with the path
 /// `<model K>` (K its place in the ensemble, from 0), which the CLI replaces by the
@@ -348,13 +430,26 @@ pub fn far_outliers(points: &[[f64; 3]]) -> Vec<usize> {
 /// other vertex is a sizeable share of their 8th), while a copy of the cloud moved by
 /// a rounding error or a small share of the spacing joins its original.
 pub fn near_duplicate_roots(local: &[[f32; 3]], share: f32) -> Vec<u32> {
-    let n = local.len();
+    let knn = crate::pipeline::candidates::knn_table(local, NEAR_K);
+    near_duplicate_roots_with(&knn, &reach_of(&knn, local.len()), share)
+}
+
+/// Neighbours [`near_duplicate_roots`] reads per point (its reach is the distance to
+/// the last of them).
+const NEAR_K: usize = 8;
+
+/// Per point, the distance to its farthest of the [`NEAR_K`] nearest other points.
+fn reach_of(knn: &crate::spatial::kdtree::KnnTable, n: usize) -> Vec<f32> {
+    (0..n).map(|i| knn.row(i).1.last().copied().unwrap_or(0.0).sqrt()).collect()
+}
+
+/// [`near_duplicate_roots`] over a [`NEAR_K`]-nearest table and its reaches.
+fn near_duplicate_roots_with(knn: &crate::spatial::kdtree::KnnTable, reach: &[f32], share: f32) -> Vec<u32> {
+    let n = reach.len();
     let mut parent: Vec<u32> = (0..n as u32).collect();
     if n < 2 {
         return parent;
     }
-    let knn = crate::pipeline::candidates::knn_table(local, 8);
-    let reach: Vec<f32> = (0..n).map(|i| knn.row(i).1.last().copied().unwrap_or(0.0).sqrt()).collect();
     fn root(p: &mut [u32], mut x: u32) -> u32 {
         while p[x as usize] != x {
             let up = p[p[x as usize] as usize];

@@ -3,7 +3,7 @@
 
 use crate::args::{Args, Spec};
 use point2quad::pipeline::candidates::{generate, CandidateConfig};
-use point2quad::pipeline::frame::Frame;
+use point2quad::pipeline::reconstruct::prepare_cloud;
 use point2quad::{Error, Result};
 
 /// `--help` text.
@@ -29,6 +29,9 @@ OPTIONS:
                      (default 2, as `reconstruct`; 0 turns it off; 0 to 1000)
     -h, --help       this text
 
+The input is cleaned as `reconstruct` cleans it: exact and near-duplicate points
+count once (the first of each group; its copies are in no candidate), and far outliers
+(more than 10,000 times the cloud's radius away) are left out; both are noted on stderr.
 A summary (points, candidates, candidates per point, time) goes to stderr.
 ";
 
@@ -88,14 +91,18 @@ pub fn run(argv: &[String]) -> Result<()> {
         Error::InvalidInput(m) => Error::invalid(format!("{input}: {m}")),
         other => other,
     };
-    let frame = Frame::fit(&points).map_err(named)?;
-    let local = frame.to_local_all(&points);
+    // The same input hygiene as `reconstruct` (duplicates counted once, far outliers
+    // left out, near-duplicates merged at its default share), so the candidates are
+    // the ones `reconstruct` classifies; indices are mapped back to the input's.
+    let merge_share = point2quad::pipeline::reconstruct::ReconstructConfig::default().merge_share;
+    let prep = prepare_cloud(&points, merge_share).map_err(named)?;
     let t1 = std::time::Instant::now();
-    let cands = generate(&local, &cfg).map_err(named)?;
+    let cands = generate(&prep.local, &cfg).map_err(named)?;
     let t_gen = t1.elapsed();
     let mut text = String::with_capacity(cands.quads.len() * 24);
     for q in &cands.quads {
         use std::fmt::Write;
+        let q = q.map(|i| prep.distinct[i as usize]);
         let _ = writeln!(text, "{} {} {} {}", q[0], q[1], q[2], q[3]);
     }
     point2quad::io::atomic::write_atomic(std::path::Path::new(&output), |w| {
@@ -111,5 +118,17 @@ pub fn run(argv: &[String]) -> Result<()> {
         t_gen.as_secs_f64(),
         output
     ));
+    crate::cmd_reconstruct::hygiene_notes(
+        CMD,
+        std::path::Path::new(input),
+        &points,
+        &crate::cmd_reconstruct::Hygiene {
+            duplicates: prep.duplicates,
+            outliers: prep.outliers,
+            first_outlier: prep.first_outlier,
+            unresolved: prep.unresolved,
+            first_unresolved: prep.first_unresolved,
+        },
+    );
     Ok(())
 }

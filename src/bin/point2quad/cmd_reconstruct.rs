@@ -235,21 +235,18 @@ pub fn run(argv: &[String]) -> Result<()> {
         pp.close.untangled,
         out.display()
     ));
-    if rep.duplicates > 0 {
-        crate::output::stderr(&format!(
-            "reconstruct: {} duplicate or near-duplicate point(s) counted once (see --merge-share)\n",
-            rep.duplicates
-        ));
-    }
-    if let Some(i) = rep.first_outlier {
-        crate::output::stderr(&format!(
-            "reconstruct: warning: {}: {} far outlier(s) left out (more than {:.0e} times the cloud's radius away); the first is point {i} (counting from 0) at {:?}\n",
-            input.display(),
-            rep.outliers,
-            point2quad::pipeline::reconstruct::OUTLIER_RADII,
-            points[i]
-        ));
-    }
+    hygiene_notes(
+        "reconstruct",
+        &input,
+        &points,
+        &Hygiene {
+            duplicates: rep.duplicates,
+            outliers: rep.outliers,
+            first_outlier: rep.first_outlier,
+            unresolved: rep.unresolved,
+            first_unresolved: rep.first_unresolved,
+        },
+    );
     if rep.faces == 0 {
         crate::output::stderr(&format!(
             "reconstruct: warning: no faces: {} holds no surface the model recognises \
@@ -276,7 +273,8 @@ pub fn run(argv: &[String]) -> Result<()> {
             "reconstruct: warning: {}: only {corners} of {usable} points are corners of a face, so most of \
              the surface was not found; if the points are not the vertices of a quad mesh (a raw scan), \
              resample them first: the method picks faces among the input points (README, \"What the \
-             input must be\")\n",
+             input must be\"); if they are, but its quads are elongated (beyond about 5:1), a \
+             larger --k (e.g. 40) reaches their far corners\n",
             input.display()
         ));
     }
@@ -286,4 +284,48 @@ pub fn run(argv: &[String]) -> Result<()> {
         t0.elapsed().as_secs_f64() * 1e3
     ));
     Ok(())
+}
+
+/// What the input hygiene left out or could not resolve (the library's
+/// `ReconstructReport` / `PreparedCloud` counts).
+pub struct Hygiene {
+    pub duplicates: usize,
+    pub outliers: usize,
+    pub first_outlier: Option<usize>,
+    pub unresolved: usize,
+    pub first_unresolved: Option<usize>,
+}
+
+/// The notes `reconstruct` and `candidates` print about the input hygiene: duplicates
+/// counted once, far outliers left out, and points the normalised frame cannot resolve
+/// (a cloud spanning too many orders of magnitude), each naming the file.
+pub fn hygiene_notes(cmd: &str, input: &std::path::Path, points: &[[f64; 3]], h: &Hygiene) {
+    if h.duplicates > 0 {
+        crate::output::stderr(&format!(
+            "{cmd}: {} duplicate or near-duplicate point(s) counted once ({})\n",
+            h.duplicates,
+            if cmd == "reconstruct" { "see --merge-share" } else { "as `reconstruct` counts them" }
+        ));
+    }
+    if let Some(i) = h.first_outlier {
+        crate::output::stderr(&format!(
+            "{cmd}: warning: {}: {} far outlier(s) left out (more than {:.0e} times the cloud's radius away); the first is point {i} (counting from 0) at {:?}\n",
+            input.display(),
+            h.outliers,
+            point2quad::pipeline::reconstruct::OUTLIER_RADII,
+            points[i]
+        ));
+    }
+    if let Some(i) = h.first_unresolved {
+        crate::output::stderr(&format!(
+            "{cmd}: warning: {}: {} point(s) lie closer together than the normalised frame resolves \
+             (their 8 nearest neighbours within 1e-6 of the cloud's radius: f32 precision), so \
+             their part of the cloud collapses and its faces are lost; the first is point {i} \
+             (counting from 0) at {:?}. The cloud spans too many orders of magnitude (parts far \
+             apart, or far points beside a small bulk): reconstruct its parts separately\n",
+            input.display(),
+            h.unresolved,
+            points[i]
+        ));
+    }
 }

@@ -276,8 +276,15 @@ fn an_output_that_is_the_input_file_is_refused() {
     let mesh = dir.write("q.obj", b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n");
     // The same file under another name: `dir/./q.obj`.
     let mesh_alias = format!("{}/./q.obj", dir.0.display());
+    // A hard link to it (session 20: canonical paths differ, so it was not refused).
+    let hard = dir.p("hard.obj");
+    #[cfg(unix)]
+    std::fs::hard_link(&cloud_obj, &hard).expect("test: hard link");
+    #[cfg(not(unix))]
+    let hard = cloud_obj.clone();
     let cases: Vec<Vec<&str>> = vec![
         vec!["reconstruct", &cloud_obj, "-o", &cloud_obj],
+        vec!["reconstruct", &cloud_obj, "-o", &hard],
         vec!["candidates", &cloud, "-o", &cloud],
         vec!["repair", &mesh, "-o", &mesh_alias],
         vec!["synth", "--from", &mesh, "-o", &cloud, "--gt", &mesh],
@@ -445,8 +452,8 @@ fn dataset_skips_zero_area_meshes_and_refuses_a_folder_with_samples() {
     assert!(!dir.path("data/synthetic_0000.p2qs").exists() && dir.path("data/grid.p2qs").exists());
 }
 
-/// An option given twice (`-o a -o b`, `-o a --output b`, `--svg` twice) was taken
-/// silently, one way or the other; it is a usage error now.
+/// An option given twice (`-o a -o b`, `-o a --output b`, `--svg` twice, a switch
+/// twice) was taken silently, one way or the other; it is a usage error now.
 #[test]
 fn an_option_given_twice_is_a_usage_error() {
     let dir = Scratch::new("audit16_twice");
@@ -457,6 +464,8 @@ fn an_option_given_twice_is_a_usage_error() {
         vec!["reconstruct", &cloud, "-o", &a, "--output", &b],
         vec!["reconstruct", &cloud, "--output", &a, "-o", &b],
         vec!["reconstruct", &cloud, "-o", &a, "--threshold", "0.4", "--threshold=0.6"],
+        // Switches too (session 20; they were taken silently).
+        vec!["reconstruct", &cloud, "-o", &a, "--no-rescue", "--no-rescue"],
     ];
     for args in &cases {
         assert_fails(&p2q(args), 2, &["given twice"], &format!("{args:?}"));
@@ -542,4 +551,28 @@ fn a_cloud_beyond_f32_resolution_is_named() {
         assert!(!err.contains("normalised frame resolves"), "{name}: {err}");
         assert_eq!(faces(&out).len(), 121, "{name}");
     }
+}
+
+/// Session 20's audit: `eval --gt` scored a ground truth with triangles or degenerate
+/// faces (`f 1 2 2 8`) without a word, so a perfect prediction read R 0.96; and
+/// `repair --score-limit 0` deleted every face silently (scores are at least 1).
+#[test]
+fn unmatchable_ground_truth_faces_and_a_useless_score_limit_are_named() {
+    let dir = Scratch::new("audit20_eval");
+    let quads = "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nv 1 1 0\nv 2 1 0\nf 1 2 5 4\nf 2 3 6 5\n";
+    let pred = dir.write("pred.obj", quads.as_bytes());
+    let err = assert_ok(&p2q(&["eval", &pred, "--gt", &pred]), "quad GT");
+    assert!(!err.contains("not quads"), "{err}");
+    let gt = dir.write("gt.obj", format!("{quads}f 1 2 4\nf 2 3 3 6\n").as_bytes());
+    let err = assert_ok(&p2q(&["eval", &pred, "--gt", &gt]), "GT with a triangle");
+    assert!(err.contains("gt.obj: 2 of its 4 faces are not quads") && err.contains("face 2"), "{err}");
+    let out = dir.p("r.obj");
+    assert_fails(
+        &p2q(&["repair", &pred, "-o", &out, "--score-limit", "0"]),
+        2,
+        &["--score-limit", "at least 1"],
+        "repair",
+    );
+    assert!(!std::path::Path::new(&out).exists());
+    assert_ok(&p2q(&["repair", &pred, "-o", &out, "--score-limit", "1"]), "repair limit 1");
 }

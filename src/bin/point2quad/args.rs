@@ -72,6 +72,13 @@ impl Args {
                     }
                     a.values.push((name, v));
                 } else if spec.switches.contains(&name.as_str()) && inline.is_none() {
+                    // Harmless, but a repeated switch is most often a pasted command
+                    // line gone wrong; refused like a repeated option.
+                    if a.switches.contains(&name) {
+                        return Err(Error::Usage(format!(
+                            "{cmd}: option {name} given twice (see `point2quad {cmd} --help`)"
+                        )));
+                    }
                     a.switches.push(name);
                 } else {
                     return Err(Error::Usage(format!(

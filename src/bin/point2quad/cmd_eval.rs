@@ -51,6 +51,24 @@ pub fn run(argv: &[String]) -> Result<()> {
     let gt = match args.value("--gt") {
         Some(g) => {
             let gt = read_mesh(Path::new(g))?;
+            // A predicted mesh is pure quad: a ground-truth face that is not a quad with
+            // four distinct corners can never be matched, so recall cannot reach 1.
+            let odd: Vec<usize> = (0..gt.faces.len())
+                .filter(|&f| {
+                    let c = &gt.faces[f];
+                    c.len() != 4 || (0..4).any(|i| c[i + 1..].contains(&c[i]))
+                })
+                .collect();
+            if let Some(&first) = odd.first() {
+                crate::output::say!(
+                    "point2quad eval: note: {g}: {} of its {} faces are not quads with four distinct \
+                     corners (the first is face {first}, counting from 0, with {} corners); they count \
+                     in recall, and no predicted quad can match them",
+                    odd.len(),
+                    gt.faces.len(),
+                    gt.faces[first].len()
+                );
+            }
             // The library's message says "ground-truth" or "predicted"; name the files.
             Some(compare(&pred, &gt, seed).map_err(|e| match e {
                 Error::InvalidInput(m) => Error::InvalidInput(format!("{pred_path} against {g}: {m}")),

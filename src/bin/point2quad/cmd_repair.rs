@@ -33,7 +33,7 @@ OPTIONS:
     --drop-non-quads       drop faces that are not quads (default: error naming the first)
     --priority P           order (default): earlier faces win ties and go in first;
                            uniform: all faces equal (ties broken by index)
-    --score-limit N        delete faces scoring above N (default 10: faces on non-manifold
+    --score-limit N        delete faces scoring above N, N >= 1 (default 10: faces on non-manifold
                            edges; 2 is the paper's rule, which also deletes faces with two or
                            more boundary edges and so erodes open borders and clustered holes)
     --no-filter            skip step (a)
@@ -54,7 +54,15 @@ pub fn run(argv: &[String]) -> Result<()> {
     // Fail on a bad output extension before doing any work.
     MeshFormat::from_path(Path::new(output))?;
     let mut cfg = PostprocessConfig {
-        score_limit: a.parsed("repair", "--score-limit", PostprocessConfig::default().score_limit)?,
+        // Scores are (E_b + 1)(10·E_n + 1) ≥ 1: a limit below 1 deletes every face.
+        score_limit: a.parsed_in(
+            "repair",
+            "--score-limit",
+            PostprocessConfig::default().score_limit,
+            1,
+            u32::MAX,
+            "every score is at least 1, so a lower limit deletes every face",
+        )?,
         score_filter: !a.switch("--no-filter"),
         fill_holes: !a.switch("--no-fill"),
         // A user's mesh keeps its small parts (reconstruct drops floaters of 4 faces).

@@ -70,7 +70,7 @@ pub fn check_output_path(path: &std::path::Path) -> Result<()> {
 /// `Usage` naming both when `out` exists and is the same file as `input`.
 pub fn check_not_input(cmd: &str, out: &std::path::Path, input: &std::path::Path) -> Result<()> {
     if let (Ok(a), Ok(b)) = (std::fs::canonicalize(out), std::fs::canonicalize(input)) {
-        if a == b {
+        if a == b || same_file(&a, &b) {
             return Err(Error::Usage(format!(
                 "{cmd}: output {} is the input file {}; choose another output name",
                 out.display(),
@@ -79,4 +79,20 @@ pub fn check_not_input(cmd: &str, out: &std::path::Path, input: &std::path::Path
         }
     }
     Ok(())
+}
+
+/// Whether two existing paths are one file under two names (a hard link): same device
+/// and inode. Unix only; elsewhere only the canonical paths are compared.
+#[cfg(unix)]
+fn same_file(a: &std::path::Path, b: &std::path::Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    match (std::fs::metadata(a), std::fs::metadata(b)) {
+        (Ok(x), Ok(y)) => x.dev() == y.dev() && x.ino() == y.ino(),
+        _ => false,
+    }
+}
+
+#[cfg(not(unix))]
+fn same_file(_: &std::path::Path, _: &std::path::Path) -> bool {
+    false
 }

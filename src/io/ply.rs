@@ -987,11 +987,60 @@ mod tests {
             (format!("{head}0 0 0 7\n1 0\n0 1 0\n3 0 1 2\n"), "t.ply:10: vertex 0 of 3 declared: the line has more values"),
             (format!("{head}0 0\n0 1 0 0\n0 1 0\n3 0 1 2\n"), "t.ply:10: vertex 0 of 3 declared: the line ends before"),
             (format!("{head}0 0 0\n1 0 0\n0 1 0\n3 0 1\n2\n"), "t.ply:13: face 0 of 1 declared: the line ends before"),
+            // Values that do not fit the declared type.
+            (format!("{head}0 0 0\n1 0 0\n0 1 1e39\n3 0 1 2\n"), "t.ply:12: vertex 2 of 3 declared: property 'z' is float: '1e39' is out of range"),
+            (format!("{head}0 0 0\n1 0 0\n0 1 0\n256 0 1 2\n"), "t.ply:13: face 0 of 1 declared: the list count of property 'vertex_indices' is uchar: '256' is out of range (0 to 255)"),
+            (format!("{head}0 0 0\n1 0 0\n0 1 0\n3 0 1 2.0\n"), "t.ply:13: face 0 of 1 declared: property 'vertex_indices' is int: '2.0' is not an integer"),
+            // The header: a property twice, the format line twice, another version.
+            ("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float x\nend_header\n".into(), "t.ply:5: property 'x' declared twice in element 'vertex'"),
+            ("ply\nformat ascii 1.0\nformat ascii 1.0\nend_header\n".into(), "t.ply:3: a second 'format' line (the first is on line 2)"),
+            ("ply\nformat ascii 2.0\nend_header\n".into(), "t.ply:2: unsupported PLY version '2.0'"),
         ];
         for (src, want) in &cases {
             let e = parse_ply(src.as_bytes(), "t.ply").unwrap_err().to_string();
             assert!(e.contains(want), "got '{e}', want '{want}'");
         }
+    }
+
+    /// ASCII values against their declared type: the limits pass, one beyond fails,
+    /// and the words nan/inf pass the type check (coordinates refuse them later).
+    #[test]
+    fn ascii_values_are_checked_against_their_type() {
+        use Misfit::*;
+        let cases: &[(Scalar, &str, Result<f64, Misfit>)] = &[
+            (Scalar::U8, "255", Ok(255.0)),
+            (Scalar::U8, "256", Err(OutOfRange)),
+            (Scalar::U8, "-1", Err(OutOfRange)),
+            (Scalar::I8, "-128", Ok(-128.0)),
+            (Scalar::I8, "128", Err(OutOfRange)),
+            (Scalar::U16, "65535", Ok(65535.0)),
+            (Scalar::I16, "-32769", Err(OutOfRange)),
+            (Scalar::I32, "2147483647", Ok(2147483647.0)),
+            (Scalar::I32, "-2147483649", Err(OutOfRange)),
+            (Scalar::U32, "4294967295", Ok(4294967295.0)),
+            (Scalar::U32, "-99999999999999999999", Err(OutOfRange)),
+            (Scalar::I32, "0.7", Err(NotAnInteger)),
+            (Scalar::I32, "nan", Err(NotAnInteger)),
+            (Scalar::I32, "x", Err(NotANumber)),
+            (Scalar::I32, "-", Err(NotANumber)),
+            (Scalar::F32, "3.4028235e38", Ok(3.4028235e38)),
+            (Scalar::F32, "3.5e38", Err(OutOfRange)),
+            (Scalar::F32, "0.1", Ok(0.1)),
+            (Scalar::F64, "3.5e38", Ok(3.5e38)),
+            (Scalar::F64, "-1e309", Err(OutOfRange)),
+            (Scalar::F32, "1e400", Err(OutOfRange)),
+            (Scalar::F32, "x", Err(NotANumber)),
+        ];
+        for &(t, tok, want) in cases {
+            let got = t.text_real(tok.as_bytes());
+            assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits), "{t:?} {tok}");
+        }
+        for (t, tok) in [(Scalar::F32, "inf"), (Scalar::F64, "-Infinity"), (Scalar::F32, "nan")] {
+            assert!(t.text_real(tok.as_bytes()).is_ok_and(|v| !v.is_finite()), "{t:?} {tok}");
+        }
+        assert_eq!(Scalar::U8.text_int(b"7"), Ok(7));
+        assert_eq!(Scalar::U8.range_text(), "0 to 255");
+        assert_eq!(Scalar::F32.range_text(), "at most ±3.4028235e38");
     }
 
     /// Regression: an element with no properties and a count of 10^18 made the

@@ -311,6 +311,11 @@ mod tests {
             (b"# only a comment\n\n", "t.xyz: contains no points"),
             (b"", "t.xyz: contains no points"),
             (b"1.5\n", "t.xyz:1: expected 'x y z' or a point count"),
+            (b"1 2 3\n1,5 2,5 3,5\n", "t.xyz:2: point 1: '1,5 2,5 3,5' looks like decimal commas"),
+            (
+                b"1\t2\t3\n1,5\t2,5\t3,5 # c\n",
+                "t.xyz:2: point 1: '1,5\\t2,5\\t3,5' looks like decimal commas",
+            ),
         ];
         for (src, want) in cases {
             let e = parse_points(src, PointFormat::Xyz, "t.xyz").unwrap_err().to_string();

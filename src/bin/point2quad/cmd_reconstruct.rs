@@ -273,8 +273,8 @@ pub fn run(argv: &[String]) -> Result<()> {
             "reconstruct: warning: {}: only {corners} of {usable} points are corners of a face, so most of \
              the surface was not found; if the points are not the vertices of a quad mesh (a raw scan), \
              resample them first: the method picks faces among the input points (README, \"What the \
-             input must be\"); if they are, but its quads are elongated (beyond about 5:1), a \
-             larger --k (e.g. 40) reaches their far corners\n",
+             input must be\"); if they are, quads elongated beyond about 6:1 are a known limit \
+             (README, \"Where it fails\")\n",
             input.display()
         ));
     }

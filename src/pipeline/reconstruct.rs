@@ -299,7 +299,7 @@ pub const UNRESOLVED_SHARE: f64 = 1.0 / 1048576.0;
 /// `InvalidInput` as [`Frame::fit`], for fewer than 4 distinct points, or a merge share
 /// outside [0, 0.5].
 pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCloud> {
-    if !(merge_share >= 0.0 && merge_share <= 0.5) {
+    if !(0.0..=0.5).contains(&merge_share) {
         return Err(Error::invalid(format!("merge share {merge_share} must be in [0, 0.5]")));
     }
     // Validate the cloud as given (errors name input indices), then work on its

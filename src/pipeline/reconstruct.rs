@@ -139,29 +139,17 @@ pub fn reconstruct_ensemble_with_report(
     if !(cfg.threshold >= 0.0 && cfg.threshold < 1.0) {
         return Err(Error::invalid(format!("threshold {} must be in [0, 1)", cfg.threshold)));
     }
-    if !(cfg.merge_share >= 0.0 && cfg.merge_share <= 0.5) {
-        return Err(Error::invalid(format!("merge share {} must be in [0, 0.5]", cfg.merge_share)));
-    }
-    // Before any work on the cloud.
+    // Before any work on the cloud (the merge share is checked by `prepare_cloud`).
     crate::pipeline::candidates::check_neighbour_counts(&cfg.candidates)?;
     let mut report = ReconstructReport { points: points.len(), ..Default::default() };
     let mut clock = Clock::new();
-    let PreparedCloud {
-        distinct,
-        uniq,
-        frame,
-        local,
-        duplicates,
-        outliers,
-        first_outlier,
-        unresolved,
-        first_unresolved,
-    } = prepare_cloud(points, cfg.merge_share)?;
-    report.duplicates = duplicates;
-    report.outliers = outliers;
-    report.first_outlier = first_outlier;
-    report.unresolved = unresolved;
-    report.first_unresolved = first_unresolved;
+    let prep = prepare_cloud(points, cfg.merge_share)?;
+    report.duplicates = prep.duplicates;
+    report.outliers = prep.outliers;
+    report.first_outlier = prep.first_outlier;
+    report.unresolved = prep.unresolved;
+    report.first_unresolved = prep.first_unresolved;
+    let PreparedCloud { distinct, uniq, frame, local, .. } = prep;
     clock.lap(&mut report, "normalise");
     let cands = generate(&local, &cfg.candidates)?;
     report.candidates = cands.len();

@@ -576,3 +576,95 @@ fn unmatchable_ground_truth_faces_and_a_useless_score_limit_are_named() {
     assert!(!std::path::Path::new(&out).exists());
     assert_ok(&p2q(&["repair", &pred, "-o", &out, "--score-limit", "1"]), "repair limit 1");
 }
+
+/// Session 20's second audit: outputs replaced what they should not. An existing FIFO
+/// (or device: `train --out /dev/null`, as root, replaced the system's /dev/null with a
+/// regular file) is refused before the work; `train`/`refine` refuse an output that is
+/// one of their inputs (`--init`, `--resume`, `--model`) or a sample of `--data`; and a
+/// mesh of one quad makes a one-candidate sample that `train` skips instead of failing
+/// mid-epoch in batch norm (`--max-candidates 1` is refused for the same reason).
+#[test]
+fn outputs_never_replace_inputs_devices_or_samples() {
+    let dir = Scratch::new("audit20_outputs");
+    let data = dir.p("data");
+    assert_ok(&p2q(&["dataset", "--out", &data, "--synthetic", "2", "--seed", "1"]), "dataset");
+    let m = dir.p("m.p2qm");
+    let train = |extra: &[&str], out: &str| {
+        let mut args =
+            vec!["train", "--data", &data, "--out", out, "--epochs", "1", "--max-candidates", "500"];
+        args.extend_from_slice(extra);
+        p2q(&args)
+    };
+    assert_ok(&train(&[], &m), "train");
+    let before = std::fs::read(&m).expect("test: read");
+    let ckpt = format!("{m}.ckpt");
+    assert_fails(&train(&["--init", &m], &m), 2, &["is the input file"], "--init X --out X");
+    assert_fails(&train(&["--resume", &ckpt], &m), 2, &["is the input file"], "--resume X.ckpt --out X");
+    let sample = std::fs::read_dir(&data)
+        .expect("test: list")
+        .map(|e| e.expect("test: entry").path())
+        .find(|p| p.extension().is_some_and(|e| e == "p2qs"))
+        .expect("test: a sample");
+    let sample = sample.to_string_lossy().to_string();
+    let sample_bytes = std::fs::read(&sample).expect("test: read");
+    assert_fails(&train(&[], &sample), 2, &["dataset folder"], "--out a sample");
+    let r = p2q(&["refine", "--data", &data, "--model", &m, "--out", &m, "--epochs", "1"]);
+    assert_fails(&r, 2, &["is the input file"], "refine --model X --out X");
+    let r = p2q(&["refine", "--data", &data, "--model", &m, "--out", &sample, "--epochs", "1"]);
+    assert_fails(&r, 2, &["dataset folder"], "refine --out a sample");
+    assert_eq!(std::fs::read(&m).expect("test: read"), before, "the weights were replaced");
+    assert_eq!(std::fs::read(&sample).expect("test: read"), sample_bytes, "a sample was replaced");
+    let m1 = dir.p("m1.p2qm");
+    let r = p2q(&["train", "--data", &data, "--out", &m1, "--epochs", "1", "--max-candidates", "1"]);
+    assert_fails(&r, 2, &["at least 2"], "--max-candidates 1");
+    #[cfg(unix)]
+    {
+        let fifo = dir.p("fifo.obj");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status().is_ok_and(|s| s.success());
+        if made {
+            let cloud = dir.write("c.xyz", &xyz(&cube_cloud(1.0)));
+            let r = p2q(&["reconstruct", &cloud, "-o", &fifo]);
+            assert_fails(&r, 1, &["fifo.obj", "not a regular file"], "reconstruct -o FIFO");
+            assert_fails(&train(&[], &fifo), 1, &["fifo.obj", "not a regular file"], "train --out FIFO");
+            use std::os::unix::fs::FileTypeExt;
+            let kind = std::fs::symlink_metadata(&fifo).expect("test: stat").file_type();
+            assert!(kind.is_fifo(), "the FIFO was replaced");
+        } else {
+            eprintln!("mkfifo unavailable: the FIFO case is skipped");
+        }
+    }
+    // One quad: a sample of one candidate, skipped by training (the other sample trains).
+    let meshes = dir.p("meshes");
+    std::fs::create_dir_all(&meshes).expect("test: mkdir");
+    std::fs::write(format!("{meshes}/one.obj"), "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")
+        .expect("test: write");
+    let mixed = dir.p("mixed");
+    let r = p2q(&[
+        "dataset",
+        "--out",
+        &mixed,
+        "--synthetic",
+        "2",
+        "--meshes",
+        &meshes,
+        "--seed",
+        "1",
+        "--noise",
+        "0",
+    ]);
+    assert_ok(&r, "dataset with a one-quad mesh");
+    let r = p2q(&[
+        "train",
+        "--data",
+        &mixed,
+        "--out",
+        &dir.p("mx.p2qm"),
+        "--epochs",
+        "1",
+        "--max-candidates",
+        "500",
+        "--val-fraction",
+        "0",
+    ]);
+    assert_ok(&r, "train with a one-candidate sample");
+}

@@ -88,7 +88,7 @@ impl SampleGeometry {
         // on k: rows are ordered by (distance, index)), then its normal table.
         let k = cfg.k.max(cfg.normal_k).max(cfg.spacing_k).max(3);
         let knn = knn_table(points, k);
-        let table = normal_rows(&knn, n, cfg.normal_k);
+        let table = normal_rows(points, &knn, n, cfg.normal_k);
         let normal_w = table.k;
         let mut normals = estimate_normals(points, &table);
         orient_normals(points, &table, &mut normals);

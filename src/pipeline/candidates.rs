@@ -212,10 +212,16 @@ pub fn knn_table(points: &[[f32; 3]], k: usize) -> KnnTable {
     KdTree::build(points).knn_batch(points, k + 1)
 }
 
-/// The first `normal_k + 1` columns of every row of `knn` (the point itself and its
-/// `normal_k` nearest): the neighbourhoods of the PCA normals. Training's augmentation
-/// rebuilds the normals over the very same rows.
-pub(crate) fn normal_rows(knn: &KnnTable, n: usize, normal_k: usize) -> KnnTable {
+/// The neighbourhoods of the PCA normals: per point, the first `normal_k + 1` columns of
+/// its row of `knn` (the point itself and its `normal_k` nearest), except where those
+/// are collinear ([`collinear_line`]: quads elongated beyond about 6:1 put a point's 12
+/// nearest all on its own lattice line, and its PCA normal turns arbitrarily about that
+/// line; session 20). There the last [`OFF_LINE_SWAPS`] entries give way to the nearest
+/// points of the rest of the row that lie off the line, so the neighbourhood spans the
+/// surface. Rows of other points are the plain prefix, so clouds without collinear
+/// neighbourhoods get exactly the normals they had. Training's augmentation rebuilds the
+/// normals over the very same rows.
+pub(crate) fn normal_rows(points: &[[f32; 3]], knn: &KnnTable, n: usize, normal_k: usize) -> KnnTable {
     let w = knn.indices.len().checked_div(n).unwrap_or(0);
     let nk = (normal_k + 1).min(w);
     let mut t = KnnTable {
@@ -225,10 +231,80 @@ pub(crate) fn normal_rows(knn: &KnnTable, n: usize, normal_k: usize) -> KnnTable
         dist_sq: Vec::with_capacity(n * nk),
     };
     for i in 0..n {
-        t.indices.extend_from_slice(&knn.indices[i * w..i * w + nk]);
-        t.dist_sq.extend_from_slice(&knn.dist_sq[i * w..i * w + nk]);
+        let (row, d2) = (&knn.indices[i * w..(i + 1) * w], &knn.dist_sq[i * w..(i + 1) * w]);
+        let start = t.indices.len();
+        t.indices.extend_from_slice(&row[..nk]);
+        t.dist_sq.extend_from_slice(&d2[..nk]);
+        if nk < 4 || w <= nk {
+            continue;
+        }
+        let Some((mean, dir, tol)) = collinear_line(points, &row[..nk]) else { continue };
+        let off_line = |j: u32| {
+            let p = points[j as usize];
+            let d = [p[0] as f64 - mean[0], p[1] as f64 - mean[1], p[2] as f64 - mean[2]];
+            let along = d[0] * dir[0] + d[1] * dir[1] + d[2] * dir[2];
+            d[0] * d[0] + d[1] * d[1] + d[2] * d[2] - along * along > tol * tol
+        };
+        let extra: Vec<usize> = (nk..w).filter(|&c| off_line(row[c])).take(OFF_LINE_SWAPS).collect();
+        // The farthest entries of the prefix give way, in order, so the row stays sorted
+        // by distance up to the swapped tail.
+        for (s, &c) in extra.iter().enumerate() {
+            let at = start + nk - extra.len() + s;
+            t.indices[at] = row[c];
+            t.dist_sq[at] = d2[c];
+        }
     }
     t
+}
+
+/// How many entries of a collinear normal neighbourhood [`normal_rows`] replaces.
+pub(crate) const OFF_LINE_SWAPS: usize = 4;
+
+/// A neighbourhood is collinear when its second principal variance is below this share
+/// of its first (its points lie within about 3% of its length from one line).
+pub(crate) const COLLINEAR_RATIO: f64 = 1e-3;
+
+/// When the points `row` indexes are collinear (second covariance eigenvalue below
+/// [`COLLINEAR_RATIO`] times the first): their mean, the line's unit direction, and the
+/// distance from the line beyond which a point counts as off it (a tenth of the
+/// neighbourhood's standard deviation along the line). `None` otherwise, or when the
+/// points all coincide.
+pub(crate) fn collinear_line(points: &[[f32; 3]], row: &[u32]) -> Option<([f64; 3], [f64; 3], f64)> {
+    let n = row.len() as f64;
+    let mut mean = [0.0f64; 3];
+    for &j in row {
+        let p = points[j as usize];
+        for a in 0..3 {
+            mean[a] += p[a] as f64 / n;
+        }
+    }
+    let mut c = [[0.0f64; 3]; 3];
+    for &j in row {
+        let p = points[j as usize];
+        let d = [p[0] as f64 - mean[0], p[1] as f64 - mean[1], p[2] as f64 - mean[2]];
+        for a in 0..3 {
+            for b in 0..3 {
+                c[a][b] += d[a] * d[b] / n;
+            }
+        }
+    }
+    let m = nalgebra::Matrix3::from_fn(|a, b| c[a][b]);
+    if !m.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+    let eig = nalgebra::SymmetricEigen::new(m);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let (l1, l2) = (eig.eigenvalues[order[0]], eig.eigenvalues[order[1]]);
+    if !(l1 > 0.0) || l2 > COLLINEAR_RATIO * l1 {
+        return None;
+    }
+    let v = eig.eigenvectors.column(order[0]);
+    let len = v.norm();
+    if !(len > 0.0) {
+        return None;
+    }
+    Some((mean, [v[0] / len, v[1] / len, v[2] / len], 0.1 * l1.sqrt()))
 }
 
 /// Point `i`'s neighbours from a table row: the point itself removed, at most `k`.
@@ -1072,7 +1148,7 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
     let knn = knn_table(points, k);
 
     // PCA on the point itself and its `normal_k` nearest.
-    let normal_table = normal_rows(&knn, n, cfg.normal_k);
+    let normal_table = normal_rows(points, &knn, n, cfg.normal_k);
     let mut normals = estimate_normals(points, &normal_table);
     orient_normals(points, &normal_table, &mut normals);
     let spacing = local_spacing(points, &knn, cfg.spacing_k);
@@ -1446,6 +1522,86 @@ mod tests {
                 assert!(keys.binary_search(&f).is_ok(), "cell ({x},{y}) missing");
             }
         }
+    }
+
+    /// Session 20: on a grid of 7:1 cells (tilted out of the plane) a point's 12
+    /// nearest lie on its own lattice line, so its PCA normal
+    /// turned arbitrarily about the line and half the cells were no candidate. The
+    /// normal rows now reach off the line: every normal is the sheet's, and every cell
+    /// is a candidate. Without the swap (the plain prefix) the test fails on both.
+    #[test]
+    fn elongated_cells_get_the_sheets_normals_and_all_their_cells() {
+        let (nx, ny, a) = (10, 24, 7.0f32);
+        let (c, s) = (0.8f32, 0.6f32); // a tilt about the x axis
+        let pts: Vec<[f32; 3]> = grid(nx, ny, 0.0)
+            .iter()
+            .map(|p| {
+                let (x, y, z) = (p[0] * a, p[1], p[2]);
+                [x, c * y - s * z, s * y + c * z]
+            })
+            .collect();
+        let sheet = [0.0f32, -s, c];
+        let cand = generate(&pts, &CandidateConfig::default()).unwrap();
+        for (i, nrm) in cand.normals.iter().enumerate() {
+            assert!(dot(*nrm, sheet).abs() > 0.99, "point {i}: normal {nrm:?}");
+        }
+        let mut keys: Vec<[u32; 4]> = cand.quads.iter().map(vertex_set).collect();
+        keys.sort_unstable();
+        for y in 0..ny - 1 {
+            for x in 0..nx - 1 {
+                let v = (y * nx + x) as u32;
+                let mut f = [v, v + 1, v + nx as u32, v + nx as u32 + 1];
+                f.sort_unstable();
+                assert!(keys.binary_search(&f).is_ok(), "cell ({x},{y}) missing");
+            }
+        }
+    }
+
+    /// Where no normal neighbourhood is collinear, the normal rows are the plain prefix
+    /// of the kNN rows (so such clouds get exactly the normals they had before session
+    /// 20); where one is, only its last `OFF_LINE_SWAPS` entries change, to points of the
+    /// rest of its row that lie off the line.
+    #[test]
+    fn normal_rows_change_only_collinear_neighbourhoods() {
+        let cfg = CandidateConfig::default();
+        let prefix = |knn: &KnnTable, n: usize, i: usize| {
+            let w = knn.indices.len() / n;
+            knn.indices[i * w..i * w + cfg.normal_k + 1].to_vec()
+        };
+        let square = grid(12, 12, 0.3);
+        let knn = knn_table(&square, cfg.k);
+        let t = normal_rows(&square, &knn, square.len(), cfg.normal_k);
+        for i in 0..square.len() {
+            assert_eq!(
+                t.indices[i * t.k..(i + 1) * t.k].to_vec(),
+                prefix(&knn, square.len(), i),
+                "point {i}"
+            );
+        }
+        let long: Vec<[f32; 3]> = grid(6, 30, 0.0).iter().map(|p| [p[0] * 8.0, p[1], 0.0]).collect();
+        let n = long.len();
+        let knn = knn_table(&long, cfg.k);
+        let t = normal_rows(&long, &knn, n, cfg.normal_k);
+        let mut changed = 0;
+        for i in 0..n {
+            let (row, plain) = (&t.indices[i * t.k..(i + 1) * t.k], prefix(&knn, n, i));
+            let keep = t.k - OFF_LINE_SWAPS;
+            assert_eq!(row[..keep], plain[..keep], "point {i}: the nearest are kept");
+            let collinear = collinear_line(&long, &plain).is_some();
+            assert_eq!(row != plain.as_slice(), collinear, "point {i}: changed iff collinear");
+            if row != plain.as_slice() {
+                changed += 1;
+                // The new entries are off the point's column (another x).
+                for &j in &row[keep..] {
+                    if !plain.contains(&j) {
+                        assert_ne!(long[j as usize][0], long[i][0], "point {i}: {j} is on its line");
+                    }
+                }
+            }
+            assert!(collinear_line(&long, &row[..]).is_none(), "point {i}: still collinear");
+        }
+        // Away from the ends of the columns every 8:1 neighbourhood of 12 is collinear.
+        assert!(changed >= n / 2, "{changed} of {n} changed");
     }
 
     #[test]

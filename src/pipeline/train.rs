@@ -264,9 +264,17 @@ pub fn train(
     check_samples(train, model)?;
     check_samples(val, model)?;
     augment::check_settings(cfg.scale, cfg.jitter)?;
-    let usable: Vec<usize> = (0..train.len()).filter(|&i| !train[i].labels.is_empty()).collect();
+    if cfg.max_candidates < 2 {
+        return Err(Error::invalid(format!(
+            "max_candidates must be at least 2 (batch norm needs two rows), got {}",
+            cfg.max_candidates
+        )));
+    }
+    // A sample needs two candidates: batch norm in train mode normalises over the drawn
+    // rows (a one-quad mesh's sample failed mid-epoch). Smaller ones are skipped.
+    let usable: Vec<usize> = (0..train.len()).filter(|&i| train[i].labels.len() >= 2).collect();
     if usable.is_empty() {
-        return Err(Error::invalid("no training sample has candidates"));
+        return Err(Error::invalid("no training sample has two or more candidates"));
     }
     // Moving points needs each sample's neighbours, normals and spacing: built once
     // (deterministic, no RNG), so a resumed run rebuilds the same.

@@ -129,6 +129,11 @@ pub fn run(argv: &[String]) -> Result<()> {
     cfg.seed = a.parsed(cmd, "--seed", 0u64)?;
     let split = Split::from_args(cmd, &a)?;
     crate::output::check_output_path(&out)?;
+    crate::output::check_not_in_dataset(cmd, &out, &data)?;
+    crate::output::check_not_input(cmd, &out, &base_path)?;
+    for m in a.value("--fold-models").into_iter().flat_map(|v| v.split(',')) {
+        crate::output::check_not_input(cmd, &out, Path::new(m.trim()))?;
+    }
     let base = Model::load(&base_path)?;
     let fold_models: Vec<Model> = match a.value("--fold-models") {
         None => Vec::new(),

@@ -277,8 +277,12 @@ pub fn run(argv: &[String]) -> Result<()> {
     cfg.max_candidates = a.parsed(cmd, "--max-candidates", cfg.max_candidates)?;
     // One message per option, naming it and the value given.
     let split = Split::from_args(cmd, &a)?.with_fold_arg(cmd, &a)?;
-    if cfg.max_candidates == 0 {
-        return Err(Error::Usage("train: --max-candidates must be positive, got 0".into()));
+    // Batch norm in train mode needs two rows: one candidate per step fails mid-epoch.
+    if cfg.max_candidates < 2 {
+        return Err(Error::Usage(format!(
+            "train: --max-candidates must be at least 2 (batch norm needs two rows), got {}",
+            cfg.max_candidates
+        )));
     }
     if !(cfg.sgd.lr.is_finite() && cfg.sgd.lr > 0.0) {
         return Err(Error::Usage(format!("train: --lr must be a finite number > 0, got {}", cfg.sgd.lr)));
@@ -309,6 +313,14 @@ pub fn run(argv: &[String]) -> Result<()> {
     // even before the samples are read (a large dataset takes a while to load).
     crate::output::check_output_path(&out)?;
     crate::output::check_output_path(&ckpt_path)?;
+    // Neither may be a file this run reads (`--out X --init X` replaced the weights it
+    // started from; `--out C --resume C` turned the checkpoint into weights only).
+    for o in [&out, &ckpt_path] {
+        crate::output::check_not_in_dataset(cmd, o, &data)?;
+        for input in [a.value("--resume"), a.value("--init")].into_iter().flatten() {
+            crate::output::check_not_input(cmd, o, Path::new(input))?;
+        }
+    }
 
     let (mut model, resume) = match a.value("--resume") {
         Some(r) => {

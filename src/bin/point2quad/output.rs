@@ -40,7 +40,8 @@ pub fn stderr(text: &str) {
 ///
 /// # Errors
 /// `Io` naming `path`: "no such folder" when its parent is missing, "not a folder" when
-/// the parent is a file, "is a directory" when `path` is one.
+/// the parent is a file, "is a directory" when `path` is one, "not a regular file" when
+/// it exists as a device, pipe or socket.
 pub fn check_output_path(path: &std::path::Path) -> Result<()> {
     let parent = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
@@ -59,6 +60,18 @@ pub fn check_output_path(path: &std::path::Path) -> Result<()> {
     }
     if path.is_dir() {
         return fail(ErrorKind::Other, "is a directory");
+    }
+    // An existing device, pipe or socket would be replaced by the rename that ends an
+    // atomic write (`train --out /dev/null`, run as root, replaced the system's
+    // /dev/null with a regular file). A symbolic link to a regular file is fine.
+    if let Ok(m) = std::fs::metadata(path) {
+        if !m.is_file() {
+            return fail(
+                ErrorKind::Other,
+                "exists and is not a regular file (a device, pipe or socket); outputs are written \
+                 to a temporary file and renamed over it, so choose a file name",
+            );
+        }
     }
     Ok(())
 }
@@ -95,4 +108,29 @@ fn same_file(a: &std::path::Path, b: &std::path::Path) -> bool {
 #[cfg(not(unix))]
 fn same_file(_: &std::path::Path, _: &std::path::Path) -> bool {
     false
+}
+
+/// Refuses an output that would replace part of the dataset folder `data` that
+/// `train`/`refine` read: a `.p2qs` sample or `index.txt` in it (`train --data D --out
+/// D/x.p2qs` replaced a sample with weights, and the next run failed on it).
+///
+/// # Errors
+/// `Usage` naming the output and the folder.
+pub fn check_not_in_dataset(cmd: &str, out: &std::path::Path, data: &std::path::Path) -> Result<()> {
+    let parent = match out.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => std::path::Path::new("."),
+    };
+    let sample = out.extension().is_some_and(|e| e.eq_ignore_ascii_case("p2qs"))
+        || out.file_name().is_some_and(|n| n == "index.txt");
+    if let (true, Ok(a), Ok(b)) = (sample, std::fs::canonicalize(parent), std::fs::canonicalize(data)) {
+        if a == b {
+            return Err(Error::Usage(format!(
+                "{cmd}: output {} would replace a file of the dataset folder {}; choose another output name",
+                out.display(),
+                data.display()
+            )));
+        }
+    }
+    Ok(())
 }

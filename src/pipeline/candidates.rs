@@ -296,12 +296,13 @@ pub(crate) fn collinear_line(points: &[[f32; 3]], row: &[u32]) -> Option<([f64; 
     let mut order = [0usize, 1, 2];
     order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
     let (l1, l2) = (eig.eigenvalues[order[0]], eig.eigenvalues[order[1]]);
-    if !(l1 > 0.0) || l2 > COLLINEAR_RATIO * l1 {
+    // `l1 > 0.0` is false for NaN too.
+    if l1.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || l2 > COLLINEAR_RATIO * l1 {
         return None;
     }
     let v = eig.eigenvectors.column(order[0]);
     let len = v.norm();
-    if !(len > 0.0) {
+    if len.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
     Some((mean, [v[0] / len, v[1] / len, v[2] / len], 0.1 * l1.sqrt()))
@@ -1598,7 +1599,7 @@ mod tests {
                     }
                 }
             }
-            assert!(collinear_line(&long, &row[..]).is_none(), "point {i}: still collinear");
+            assert!(collinear_line(&long, row).is_none(), "point {i}: still collinear");
         }
         // Away from the ends of the columns every 8:1 neighbourhood of 12 is collinear.
         assert!(changed >= n / 2, "{changed} of {n} changed");

@@ -273,7 +273,7 @@ pub fn run(argv: &[String]) -> Result<()> {
             "reconstruct: warning: {}: only {corners} of {usable} points are corners of a face, so most of \
              the surface was not found; if the points are not the vertices of a quad mesh (a raw scan), \
              resample them first: the method picks faces among the input points (README, \"What the \
-             input must be\"); if they are, quads elongated beyond about 6:1 are a known limit \
+             input must be\"); if they are, quads elongated beyond about 7:1 are a known limit \
              (README, \"Where it fails\")\n",
             input.display()
         ));

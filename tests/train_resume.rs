@@ -70,3 +70,27 @@ fn bad_training_inputs_are_errors() {
     };
     assert!(train(&mut model, &data, &[], &cfg(1), Some(bad), &mut no_progress, &mut ok).is_err());
 }
+
+/// Session 20's audit: a one-candidate sample failed mid-epoch in batch norm (train mode
+/// needs two rows); `max_candidates` 1 did the same. The sample is skipped (an error
+/// when nothing else is left) and the setting refused.
+#[test]
+fn tiny_batches_are_refused_or_skipped() {
+    let data = samples();
+    let mut ok = |_: &Model, _: &TrainState| -> Result<()> { Ok(()) };
+    let mut one = data[0].clone();
+    let dim = one.feature_dim as usize;
+    one.candidates.truncate(1);
+    one.labels.truncate(1);
+    one.features.truncate(dim);
+    let mut model = Model::new(ModelConfig::default_preset(), 1).unwrap();
+    let reps =
+        train(&mut model, &[one.clone(), data[2].clone()], &[], &cfg(1), None, &mut no_progress, &mut ok)
+            .expect("a one-candidate sample is skipped");
+    assert_eq!(reps.len(), 1);
+    let e = train(&mut model, &[one], &[], &cfg(1), None, &mut no_progress, &mut ok).unwrap_err().to_string();
+    assert!(e.contains("two or more candidates"), "{e}");
+    let tiny = TrainConfig { max_candidates: 1, ..cfg(1) };
+    let e = train(&mut model, &data, &[], &tiny, None, &mut no_progress, &mut ok).unwrap_err().to_string();
+    assert!(e.contains("at least 2"), "{e}");
+}

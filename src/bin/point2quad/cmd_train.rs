@@ -314,12 +314,17 @@ pub fn run(argv: &[String]) -> Result<()> {
     crate::output::check_output_path(&out)?;
     crate::output::check_output_path(&ckpt_path)?;
     // Neither may be a file this run reads (`--out X --init X` replaced the weights it
-    // started from; `--out C --resume C` turned the checkpoint into weights only).
+    // started from; `--out C --resume C` turned the checkpoint into weights only). The
+    // one exception is the usual resume, `--out M --resume M.ckpt`, which continues
+    // its own checkpoint.
     for o in [&out, &ckpt_path] {
         crate::output::check_not_in_dataset(cmd, o, &data)?;
-        for input in [a.value("--resume"), a.value("--init")].into_iter().flatten() {
-            crate::output::check_not_input(cmd, o, Path::new(input))?;
+        if let Some(init) = a.value("--init") {
+            crate::output::check_not_input(cmd, o, Path::new(init))?;
         }
+    }
+    if let Some(resume) = a.value("--resume") {
+        crate::output::check_not_input(cmd, &out, Path::new(resume))?;
     }
 
     let (mut model, resume) = match a.value("--resume") {

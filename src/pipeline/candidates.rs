@@ -1513,6 +1513,11 @@ mod tests {
         let (nx, ny) = (12, 9);
         let pts = grid(nx, ny, 0.1);
         let c = generate(&pts, &CandidateConfig::default()).unwrap();
+        assert_all_cells(&c, nx, ny);
+    }
+
+    /// Every cell of an `nx` × `ny` point grid (row-major) is among the candidates.
+    fn assert_all_cells(c: &Candidates, nx: usize, ny: usize) {
         let mut keys: Vec<[u32; 4]> = c.quads.iter().map(vertex_set).collect();
         keys.sort_unstable();
         for y in 0..ny - 1 {
@@ -1546,16 +1551,7 @@ mod tests {
         for (i, nrm) in cand.normals.iter().enumerate() {
             assert!(dot(*nrm, sheet).abs() > 0.99, "point {i}: normal {nrm:?}");
         }
-        let mut keys: Vec<[u32; 4]> = cand.quads.iter().map(vertex_set).collect();
-        keys.sort_unstable();
-        for y in 0..ny - 1 {
-            for x in 0..nx - 1 {
-                let v = (y * nx + x) as u32;
-                let mut f = [v, v + 1, v + nx as u32, v + nx as u32 + 1];
-                f.sort_unstable();
-                assert!(keys.binary_search(&f).is_ok(), "cell ({x},{y}) missing");
-            }
-        }
+        assert_all_cells(&cand, nx, ny);
     }
 
     /// Where no normal neighbourhood is collinear, the normal rows are the plain prefix

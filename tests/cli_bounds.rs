@@ -36,6 +36,16 @@ fn work_sizing_options_are_bounded() {
     let before = dir.entries();
     let refused: Vec<(Vec<&str>, &str, &str)> = vec![
         (vec!["candidates", c, "-o", &cand, "--k", "65"], "--k must be between 3 and 64", "65"),
+        (
+            vec!["dataset", "--out", &ds, "--synthetic", "1", "--min-aspect", "0.01"],
+            "--min-aspect must be between 0.05 and 1",
+            "0.01",
+        ),
+        (
+            vec!["dataset", "--out", &ds, "--synthetic", "1", "--min-aspect", "nan"],
+            "--min-aspect must be between 0.05 and 1",
+            "NaN",
+        ),
         (vec!["candidates", c, "-o", &cand, "--k", "2"], "--k must be between 3 and 64", "2"),
         (vec!["candidates", c, "-o", &cand, "--k", huge], "--k must be between 3 and 64", huge),
         (

@@ -417,3 +417,44 @@ fn bumpy_synthetic_samples_bend_more_and_plain_ones_are_unchanged() {
     // Three in four on average: at least half of 12.
     assert!(bent >= 6, "only {bent} of 12 bumpy");
 }
+
+/// `dataset --min-aspect` (session 20's experiment): at the default 0.25 the shapes are
+/// exactly `random_shape_of`'s; at 0.1 the same stream gives the same families (a grid
+/// keeps its faces, only stretched further), and some grid then has quads more
+/// elongated than 4:1, which the default never makes.
+#[test]
+fn a_smaller_min_aspect_stretches_only_the_elongated_shapes() {
+    use point2quad::pipeline::dataset::{synthetic_mesh, synthetic_mesh_with_aspect};
+    let ratio = |m: &QuadMesh| {
+        m.quads
+            .iter()
+            .map(|q| {
+                let e: Vec<f64> = (0..4)
+                    .map(|i| {
+                        let (a, b) = (m.vertices[q[i] as usize], m.vertices[q[(i + 1) % 4] as usize]);
+                        ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+                    })
+                    .collect();
+                e.iter().cloned().fold(f64::MAX, f64::min) / e.iter().cloned().fold(0.0, f64::max)
+            })
+            .fold(f64::MAX, f64::min)
+    };
+    for i in 0..30 {
+        let (name, plain, _) = synthetic_mesh(3, i, false);
+        let (n25, m25, _) = synthetic_mesh_with_aspect(3, i, false, shapes::DEFAULT_MIN_ASPECT);
+        assert!(n25 == name && m25.vertices == plain.vertices && m25.quads == plain.quads, "{name}");
+        // The same family from the same stream (a torus or tube may get other rings).
+        let (n10, _, _) = synthetic_mesh_with_aspect(3, i, false, 0.1);
+        assert_eq!(n10, name);
+    }
+    let (mut default_min, mut narrow_min) = (f64::MAX, f64::MAX);
+    for seed in 0..30 {
+        let plain = shapes::random_shape_of(Family::Grid, &mut Rng::new(seed));
+        let narrow = shapes::random_shape_with_aspect(Family::Grid, &mut Rng::new(seed), 0.1);
+        assert!(plain.quads == narrow.quads, "seed {seed}: a grid keeps its faces");
+        default_min = default_min.min(ratio(&plain));
+        narrow_min = narrow_min.min(ratio(&narrow));
+    }
+    assert!(default_min > 0.2, "default grids reach an edge ratio of {default_min}");
+    assert!(narrow_min < 0.2, "min aspect 0.1: grids only reach {narrow_min}");
+}

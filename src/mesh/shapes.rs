@@ -741,8 +741,20 @@ pub fn random_shape(rng: &mut Rng) -> QuadMesh {
 /// sometimes anisotropic (quads elongated down to an edge ratio of about 0.2), randomly
 /// posed with [`random_pose`].
 pub fn random_shape_of(family: Family, rng: &mut Rng) -> QuadMesh {
+    random_shape_with_aspect(family, rng, DEFAULT_MIN_ASPECT)
+}
+
+/// The smallest aspect factor [`random_shape_of`] draws for its elongated third of the
+/// shapes (quads elongated up to about 4:1).
+pub const DEFAULT_MIN_ASPECT: f64 = 0.25;
+
+/// [`random_shape_of`] with the elongated third of the shapes drawing their aspect factor
+/// from `[min_aspect, 1)` instead of `[0.25, 1)` (`dataset --min-aspect`; session 20's
+/// experiment). The same random stream as [`random_shape_of`]: with `min_aspect` 0.25
+/// the shapes are identical, otherwise only the elongated ones differ.
+pub fn random_shape_with_aspect(family: Family, rng: &mut Rng, min_aspect: f64) -> QuadMesh {
     // Aspect factor for elongated quads (1 most of the time).
-    let aspect = if rng.below(3) == 0 { rng.uniform(0.25, 1.0) } else { 1.0 };
+    let aspect = if rng.below(3) == 0 { rng.uniform(min_aspect, 1.0) } else { 1.0 };
     let mut m = match family {
         Family::Grid | Family::HeightField => {
             let nu = 12 + rng.below(50);

@@ -445,9 +445,20 @@ pub const BUMP_AMPLITUDE: (f64, f64) = (0.5, 1.8);
 /// of organic shapes by 17–31°; the bumpy shapes by up to ~30°. Without it, the stream
 /// and the shapes are exactly those of earlier versions (the shipped weights' data).
 pub fn synthetic_mesh(seed: u64, index: usize, bumpy: bool) -> (String, QuadMesh, Rng) {
+    synthetic_mesh_with_aspect(seed, index, bumpy, shapes::DEFAULT_MIN_ASPECT)
+}
+
+/// [`synthetic_mesh`] with the elongated shapes' aspect factor drawn from
+/// `[min_aspect, 1)` ([`shapes::random_shape_with_aspect`]; `dataset --min-aspect`).
+pub fn synthetic_mesh_with_aspect(
+    seed: u64,
+    index: usize,
+    bumpy: bool,
+    min_aspect: f64,
+) -> (String, QuadMesh, Rng) {
     let mut rng = sample_rng(seed, index);
     let family = Family::ALL[rng.below(Family::ALL.len())];
-    let mut mesh = shapes::random_shape_of(family, &mut rng);
+    let mut mesh = shapes::random_shape_with_aspect(family, &mut rng, min_aspect);
     if bumpy && rng.below(4) != 3 {
         let waves = 1 + rng.below(4);
         let amplitude = rng.uniform(BUMP_AMPLITUDE.0, BUMP_AMPLITUDE.1);

@@ -12,7 +12,7 @@ use point2quad::mesh::coarsen::{coarsen as coarsen_mesh, CoarsenConfig};
 use point2quad::mesh::poly::QuadMesh;
 use point2quad::pipeline::candidates::CandidateConfig;
 use point2quad::pipeline::dataset::{
-    build_sample, index_line, sample_rng, save_sample, stretch_mesh, synthetic_mesh, EXTENSION,
+    build_sample, index_line, sample_rng, save_sample, stretch_mesh, synthetic_mesh_with_aspect, EXTENSION,
 };
 use point2quad::pipeline::noise::NoiseConfig;
 use point2quad::{par, Error, Result};
@@ -31,6 +31,9 @@ OPTIONS:
     --bumpy           make three synthetic shapes in four bumpy: they then bend by up
                       to ~30 degrees between neighbouring faces, as coarse organic
                       meshes do (an experiment: not in the shipped weights' recipe)
+    --min-aspect F    the elongated third of the synthetic shapes draws its aspect
+                      factor from [F, 1) (0.05 <= F <= 1; default 0.25: quads up to
+                      about 4:1; an experiment of session 20, not in the shipped recipe)
     --meshes DIR      every .obj/.off/.ply file directly in DIR (sorted by name)
     --coarsen F[,F2,...]
                       also a coarse copy of each mesh of --meshes, sample NAME@c:
@@ -138,11 +141,20 @@ pub fn run(argv: &[String]) -> Result<()> {
             "--continue-rank",
             "--coarsen",
             "--stretch",
+            "--min-aspect",
         ],
         switches: &["--bumpy"],
     };
     let args = Args::parse(CMD, argv, &spec)?;
     let bumpy = args.switch("--bumpy");
+    let min_aspect: f64 = args.parsed_in(
+        CMD,
+        "--min-aspect",
+        point2quad::mesh::shapes::DEFAULT_MIN_ASPECT,
+        0.05,
+        1.0,
+        "the candidates' edge-ratio filter stops at 0.1",
+    )?;
     if !args.positional.is_empty() {
         return Err(Error::Usage(format!(
             "{CMD}: unexpected argument {:?} (see `point2quad {CMD} --help`)",
@@ -259,7 +271,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let done = AtomicUsize::new(0);
     let results: Vec<Result<Option<String>>> = par::map(total, |k| {
         let (name, mesh, mut rng) = match &jobs[k] {
-            Job::Synthetic(i) => synthetic_mesh(seed, *i, bumpy),
+            Job::Synthetic(i) => synthetic_mesh_with_aspect(seed, *i, bumpy, min_aspect),
             Job::File(path, name) | Job::Coarse(path, name, _) | Job::Stretch(path, name, _) => {
                 let mesh = match load_quads(path) {
                     Ok(mesh) => mesh,

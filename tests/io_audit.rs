@@ -94,6 +94,10 @@ fn csv_and_whitespace_columns_still_read_the_same_points() {
         ("g.xyz", "# x, y, z\n1.0 2.0 3.0 # first, a comment\n4.5 -5.25 6e-3\n"),
         ("h.txt", "1.0,2.0,3.0 # a, b c\r\n4.5,-5.25,6e-3\r\n"),
         ("i.pts", "2\n1.0 2.0 3.0\n4.5,-5.25,6e-3\n"),
+        // Spaces or commas in the ignored columns (review, session 20: refused for a while).
+        ("j.csv", "x,y,z,time\n1.0,2.0,3.0,2024-05-01 10:00:00\n4.5,-5.25,6e-3,2024-05-01 10:00:01\n"),
+        ("k.csv", "1.0,2.0,3.0,red car\n4.5,-5.25,6e-3,blue car\n"),
+        ("l.xyz", "1.0 2.0 3.0 0.5,0.2\n4.5 -5.25 6e-3 0.5,0.2\n"),
     ] {
         let p = dir.write(file, src.as_bytes());
         let got = read_points(std::path::Path::new(&p)).unwrap_or_else(|e| panic!("{file}: {e}"));
@@ -329,6 +333,11 @@ fn ply_format_line_only_once_and_only_version_1_0() {
     // Version 1.0 in every encoding still reads.
     let m = mesh_ok(&dir, "t.ply", &format!("ply\nformat ascii 1.0\n{tail}"));
     assert_eq!(m.vertices, vec![[1.0, 2.0, 3.0]]);
+    // So does 1.0 written `1` or `1.00` (review, session 20).
+    for v in ["1", "1.00"] {
+        let m = mesh_ok(&dir, "t.ply", &format!("ply\nformat ascii {v}\n{tail}"));
+        assert_eq!(m.vertices, vec![[1.0, 2.0, 3.0]], "version {v}");
+    }
     for (fmt, bytes) in [
         ("binary_little_endian", [1f32, 2., 3.].map(f32::to_le_bytes).concat()),
         ("binary_big_endian", [1f32, 2., 3.].map(f32::to_be_bytes).concat()),

@@ -287,7 +287,9 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                     }
                 };
                 match t.next() {
-                    Some(b"1.0") => {}
+                    // `1`, `1.0`, `1.00`: the one version there is, however it is written.
+                    Some(v)
+                        if std::str::from_utf8(v).ok().and_then(|v| v.parse::<f64>().ok()) == Some(1.0) => {}
                     Some(v) => {
                         return Err(Error::parse(
                             name,

@@ -150,10 +150,12 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
 }
 
 /// The data of `line` (without its `#` comment, trimmed) when it mixes the two column
-/// separators: it has commas, and a comma-separated field, trimmed, still holds
-/// whitespace. That is the mark of decimal commas, `1,5 2,5 3,5`, which read as
-/// commas-and-spaces columns gives the point (1, 5, 2), silently. Plain CSV, with or
-/// without spaces after the commas (`1.0, 2.0, 3.0`), never mixes them.
+/// separators in its first three values: one of its first three comma-separated fields,
+/// trimmed, still holds whitespace, and the three coordinates do not all come before
+/// the first comma (`1 2 3 0.5,0.2` is a whitespace line with a comma in an ignored
+/// column). That is the mark of decimal commas, `1,5 2,5 3,5`,
+/// which read as commas-and-spaces columns gives the point (1, 5, 2), silently. Plain
+/// CSV, with or without spaces after the commas (`1.0, 2.0, 3.0`), never mixes them.
 fn decimal_comma_line(line: &[u8]) -> Option<&[u8]> {
     text::find_byte(line, b',')?;
     let data = match text::find_byte(line, b'#') {
@@ -161,8 +163,13 @@ fn decimal_comma_line(line: &[u8]) -> Option<&[u8]> {
         None => line,
     };
     text::find_byte(data, b',')?;
-    let mixed = data.split(|&b| b == b',').any(|f| trim_space(f).iter().any(|&b| text::is_space(b)));
-    mixed.then(|| trim_space(data))
+    // Only the values that give the coordinates count: extra columns are ignored, so a
+    // CSV's fourth field may hold spaces (`1,2,3,red car`), and a whitespace-separated
+    // line may hold commas after its third column (`1 2 3 0.5,0.2`).
+    let mixed = data.split(|&b| b == b',').take(3).any(|f| trim_space(f).iter().any(|&b| text::is_space(b)));
+    let first = data.split(|&b| b == b',').next().unwrap_or_default();
+    let coords_before_commas = first.split(|&b| text::is_space(b)).filter(|t| !t.is_empty()).count() >= 3;
+    (mixed && !coords_before_commas).then(|| trim_space(data))
 }
 
 /// `f` without leading and trailing whitespace.

@@ -219,8 +219,10 @@ pub fn knn_table(points: &[[f32; 3]], k: usize) -> KnnTable {
 /// line; session 20). There the last [`OFF_LINE_SWAPS`] entries give way to the nearest
 /// points of the rest of the row that lie off the line, so the neighbourhood spans the
 /// surface. Rows of other points are the plain prefix, so clouds without collinear
-/// neighbourhoods get exactly the normals they had. Training's augmentation rebuilds the
-/// normals over the very same rows.
+/// neighbourhoods get exactly the normals they had. The swapped-in points come from the
+/// rest of the kNN row, so the fix needs `k > normal_k` (the default 20 > 12; with
+/// `--k 12` there is nothing to swap in), and reaches quads up to about 10:1 at k = 20.
+/// Training's augmentation rebuilds the normals over the very same rows.
 pub(crate) fn normal_rows(points: &[[f32; 3]], knn: &KnnTable, n: usize, normal_k: usize) -> KnnTable {
     let w = knn.indices.len().checked_div(n).unwrap_or(0);
     let nk = (normal_k + 1).min(w);
@@ -245,7 +247,9 @@ pub(crate) fn normal_rows(points: &[[f32; 3]], knn: &KnnTable, n: usize, normal_
             let along = d[0] * dir[0] + d[1] * dir[1] + d[2] * dir[2];
             d[0] * d[0] + d[1] * d[1] + d[2] * d[2] - along * along > tol * tol
         };
-        let extra: Vec<usize> = (nk..w).filter(|&c| off_line(row[c])).take(OFF_LINE_SWAPS).collect();
+        // The point itself (entry 0) and its nearest stay, whatever `normal_k`.
+        let swaps = OFF_LINE_SWAPS.min(nk - 2);
+        let extra: Vec<usize> = (nk..w).filter(|&c| off_line(row[c])).take(swaps).collect();
         // The farthest entries of the prefix give way, in order, so the row stays sorted
         // by distance up to the swapped tail.
         for (s, &c) in extra.iter().enumerate() {
@@ -1599,6 +1603,14 @@ mod tests {
         }
         // Away from the ends of the columns every 8:1 neighbourhood of 12 is collinear.
         assert!(changed >= n / 2, "{changed} of {n} changed");
+        // With `normal_k` 3 (4 entries) the point itself and its nearest stay (review,
+        // session 20: all 4 entries were swapped, the point included).
+        let t3 = normal_rows(&long, &knn, n, 3);
+        for i in 0..n {
+            let w = knn.indices.len() / n;
+            let (row, plain) = (&t3.indices[i * t3.k..(i + 1) * t3.k], &knn.indices[i * w..i * w + 4]);
+            assert_eq!(row[..2], plain[..2], "point {i}");
+        }
     }
 
     #[test]

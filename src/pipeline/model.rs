@@ -189,13 +189,16 @@ impl ModelConfig {
         let cls = chain(usize::try_from(cls_in).unwrap_or(usize::MAX), &self.classifier_widths, 2);
         let round = chain(self.refine_input.dim(), &self.refine_widths, 2);
         let rounds = round.saturating_mul(self.refine_rounds as u64);
-        // The point encoder: its first KPConv (K · f weights at least, f the first
-        // width) and, for every further block, a KPConv of at least f / 4 in and out
-        // features (K · (f / 4)² ≥ K · f / 4 weights, widths never falling below f).
+        // The point encoder (as `kpfcnn::plan` lays it out): its Simple block's KPConv,
+        // K · input features · f / 2 weights (f the first width), and for every further
+        // block a KPConv of c_out / 4 ≥ f / 4 features in and out, K · (f / 4)² at least.
         let kp = self.point_encoder.as_ref().map_or(0, |k| {
-            let kf = (k.num_kernel_points as u64).saturating_mul(k.first_features_dim as u64);
-            let more = (k.blocks.len().saturating_sub(1) as u64).saturating_mul(kf / 4);
-            kf.saturating_add(more)
+            let kn = k.num_kernel_points as u64;
+            let f = k.first_features_dim as u64;
+            let first = kn.saturating_mul(k.input.dim() as u64).saturating_mul(f / 2);
+            let block = kn.saturating_mul((f / 4).saturating_mul(f / 4));
+            let more = (k.blocks.len().saturating_sub(1) as u64).saturating_mul(block);
+            first.saturating_add(more)
         });
         face.saturating_add(cls).saturating_add(rounds).saturating_add(kp)
     }
@@ -1277,6 +1280,29 @@ mod tests {
             ModelConfig::default_kp(),
             ModelConfig::paper(),
             ModelConfig { refine_rounds: 3, refine_widths: vec![32, 16], ..ModelConfig::default_preset() },
+            // A lone Simple block with a wide first layer (review, session 20: the first
+            // bound charged it K · f, twice its K · f / 2 with one input feature).
+            ModelConfig {
+                point_encoder: Some(KpfcnnConfig {
+                    blocks: vec![BlockKind::Simple],
+                    first_features_dim: 1024,
+                    out_dim: 1,
+                    ..KpfcnnConfig::default_preset()
+                }),
+                point_dim: 1,
+                ..ModelConfig::default_preset()
+            },
+            ModelConfig {
+                point_encoder: Some(KpfcnnConfig {
+                    blocks: vec![BlockKind::Simple, BlockKind::Resnetb],
+                    first_features_dim: 256,
+                    num_kernel_points: 64,
+                    out_dim: 1,
+                    ..KpfcnnConfig::default_preset()
+                }),
+                point_dim: 1,
+                ..ModelConfig::default_preset()
+            },
             ModelConfig {
                 refine_rounds: 5,
                 refine_widths: vec![32, 16],

@@ -63,7 +63,9 @@ pub fn check_output_path(path: &std::path::Path) -> Result<()> {
     }
     // An existing device, pipe or socket would be replaced by the rename that ends an
     // atomic write (`train --out /dev/null`, run as root, replaced the system's
-    // /dev/null with a regular file). A symbolic link to a regular file is fine.
+    // /dev/null with a regular file). A symbolic link to a regular file passes (the
+    // rename replaces the link, not its target; `check_not_input` refuses a link to an
+    // input).
     if let Ok(m) = std::fs::metadata(path) {
         if !m.is_file() {
             return fail(

@@ -683,3 +683,49 @@ fn outputs_never_replace_inputs_devices_or_samples() {
     ]);
     assert_ok(&r, "train with a one-candidate sample");
 }
+
+/// Session 20's second audit, messages: `refine` on a folder without samples said
+/// "train:"; `refine --val-fraction 0` printed validation figures of 0; `synth --noise
+/// -1` was an exit-1 error naming no option, and `synth` took `--noise 101`, which
+/// `dataset` refuses.
+#[test]
+fn refine_and_synth_name_themselves_and_their_options() {
+    let dir = Scratch::new("audit20_msgs");
+    let empty = dir.p("empty");
+    std::fs::create_dir_all(&empty).expect("test: mkdir");
+    let m = dir.p("m.p2qm");
+    let r = p2q(&["refine", "--data", &empty, "--model", "fixtures/point2quad-default.p2qm", "--out", &m]);
+    assert_fails(&r, 2, &["refine: no .p2qs samples"], "refine on an empty folder");
+    let data = dir.p("data");
+    assert_ok(&p2q(&["dataset", "--out", &data, "--synthetic", "2", "--seed", "1"]), "dataset");
+    assert_ok(
+        &p2q(&["train", "--data", &data, "--out", &m, "--epochs", "1", "--max-candidates", "500"]),
+        "train",
+    );
+    let r = dir.p("r.p2qm");
+    let args = [
+        "refine",
+        "--data",
+        &data,
+        "--model",
+        &m,
+        "--out",
+        &r,
+        "--rounds",
+        "1",
+        "--epochs",
+        "1",
+        "--val-fraction",
+        "0",
+    ];
+    let err = assert_ok(&p2q(&args), "refine without validation");
+    assert!(err.contains("no validation samples") && !err.contains("AP 0.000"), "{err}");
+    let c = dir.p("c.xyz");
+    for (v, want) in [("-1", "--noise must be a finite number >= 0"), ("101", "--noise must be at most 100")]
+    {
+        let r = p2q(&["synth", "--shape", "torus", "--seed", "1", "-o", &c, "--noise", v]);
+        assert_fails(&r, 2, &[want], &format!("synth --noise {v}"));
+    }
+    let r = p2q(&["synth", "--shape", "torus", "--seed", "1", "-o", &c, "--offset", "-1"]);
+    assert_fails(&r, 2, &["--offset must be a finite number >= 0"], "synth --offset -1");
+}

@@ -198,18 +198,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         fraction: args.parsed(CMD, "--noise", NoiseConfig::default().fraction)?,
         offset: args.parsed(CMD, "--offset", NoiseConfig::default().offset)?,
     };
-    for (name, v) in [("--noise", noise.fraction), ("--offset", noise.offset)] {
-        if !(v.is_finite() && v >= 0.0) {
-            return Err(Error::Usage(format!("{CMD}: {name} must be a finite number >= 0, got {v}")));
-        }
-        // A typo (1e9) otherwise fails only inside the first sample, after the output
-        // folder was made.
-        if v > MAX_NOISE {
-            return Err(Error::Usage(format!(
-                "{CMD}: {name} must be at most {MAX_NOISE}, got {v} (the surface would be lost in the noise)"
-            )));
-        }
-    }
+    check_noise(CMD, &noise)?;
     let mut jobs: Vec<Job> = (0..synthetic).map(Job::Synthetic).collect();
     if let Some(dir) = args.value("--meshes") {
         let files = mesh_files(Path::new(dir))?;
@@ -393,4 +382,25 @@ fn sanitize(stem: &str) -> String {
     } else {
         s
     }
+}
+
+/// The bounds of `--noise` and `--offset` (`dataset` and `synth`): finite, at least 0 and
+/// at most [`MAX_NOISE`].
+///
+/// # Errors
+/// `Usage` naming the option and the value.
+pub(crate) fn check_noise(cmd: &str, noise: &NoiseConfig) -> Result<()> {
+    for (name, v) in [("--noise", noise.fraction), ("--offset", noise.offset)] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(Error::Usage(format!("{cmd}: {name} must be a finite number >= 0, got {v}")));
+        }
+        // A typo (1e9) otherwise fails only inside the first sample, after the output
+        // folder was made.
+        if v > MAX_NOISE {
+            return Err(Error::Usage(format!(
+                "{cmd}: {name} must be at most {MAX_NOISE}, got {v} (the surface would be lost in the noise)"
+            )));
+        }
+    }
+    Ok(())
 }

@@ -162,7 +162,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let mut model = base.with_refinement_reading(rounds, &widths, sides, input, cfg.seed)?;
 
     let t0 = std::time::Instant::now();
-    let samples = load_dir(&data)?;
+    let samples = load_dir(cmd, &data)?;
     check_samples(&samples, &base)?;
     for m in &fold_models {
         check_samples(&samples, m)?;
@@ -202,6 +202,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         return Err(Error::Usage("refine: every sample fell into validation; lower --val-fraction".into()));
     }
     let t1 = std::time::Instant::now();
+    let no_val = va.is_empty();
     let mut progress = |p: RefineProgress| match p {
         RefineProgress::Epoch { round, epoch, loss } => {
             crate::output::stderr(&format!(
@@ -209,6 +210,11 @@ pub fn run(argv: &[String]) -> Result<()> {
                 cfg.epochs,
                 t1.elapsed().as_secs_f64()
             ));
+        }
+        // Without validation samples there is nothing to score (zeros would read as a
+        // useless model), as `train` says too.
+        RefineProgress::Round(r) if no_val => {
+            say!("\rround {}: loss {:.4}; no validation samples", r.round, r.loss)
         }
         RefineProgress::Round(r) => say!(
             "\rround {}: loss {:.4}; validation P/R at 0.5 and AP {:.3}/{:.3}/{:.4} -> {:.3}/{:.3}/{:.4}",

@@ -64,6 +64,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let seed = a.parsed(cmd, "--seed", 0u64)?;
     let noise =
         NoiseConfig { fraction: a.parsed(cmd, "--noise", 0.1)?, offset: a.parsed(cmd, "--offset", 0.1)? };
+    crate::cmd_dataset::check_noise(cmd, &noise)?;
     let mut rng = Rng::new(seed);
     let shape = a.value("--shape").unwrap_or("random");
     let mesh = if let Some(from) = a.value("--from") {

@@ -200,8 +200,8 @@ pub(crate) fn fold_of(name: &str, k: usize) -> usize {
     ((fnv(name) >> 32) % k as u64) as usize
 }
 
-/// Every `.p2qs` sample of `dir`, by file name.
-pub(crate) fn load_dir(dir: &Path) -> Result<Vec<Sample>> {
+/// Every `.p2qs` sample of `dir`, by file name; `cmd` names the subcommand in the error.
+pub(crate) fn load_dir(cmd: &str, dir: &Path) -> Result<Vec<Sample>> {
     let rd = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
     let mut files: Vec<PathBuf> = Vec::new();
     for e in rd {
@@ -213,7 +213,7 @@ pub(crate) fn load_dir(dir: &Path) -> Result<Vec<Sample>> {
     files.sort();
     if files.is_empty() {
         return Err(Error::Usage(format!(
-            "train: no .{EXTENSION} samples in {} (write some with `point2quad dataset --out DIR`)",
+            "{cmd}: no .{EXTENSION} samples in {} (write some with `point2quad dataset --out DIR`)",
             dir.display()
         )));
     }
@@ -372,7 +372,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     };
 
     let t0 = std::time::Instant::now();
-    let samples = load_dir(&data)?;
+    let samples = load_dir(cmd, &data)?;
     split.check_names(cmd, samples.iter().map(|s| s.name.as_str()))?;
     let (mut tr, mut va): (Vec<Sample>, Vec<Sample>) = (Vec::new(), Vec::new());
     for s in samples {

@@ -375,7 +375,9 @@ fn usage_errors_exit_2_and_say_what() {
     }
 }
 
-/// Bad values that parse: refused as data errors, with no output and no abort.
+/// Bad values that parse: refused with no output and no abort; since session 20 as
+/// usage errors naming the option, as `dataset` refuses them (they were data errors, exit
+/// 1, naming no option).
 #[test]
 fn bad_values_are_data_errors_without_output() {
     let dir = Scratch::new("values");
@@ -392,7 +394,7 @@ fn bad_values_are_data_errors_without_output() {
         ("--offset", "-0.5"),
     ] {
         let out = p2q(&["synth", "-o", &xyz, "--gt", &gt, flag, value]);
-        assert_fails(&out, 1, &["noise"], &format!("synth {flag} {value}"));
+        assert_fails(&out, 2, &[flag], &format!("synth {flag} {value}"));
         assert_eq!(dir.entries(), before, "synth {flag} {value}: files left behind");
     }
 }

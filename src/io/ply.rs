@@ -108,7 +108,7 @@ impl Scalar {
             Some(v) if (lo..=hi).contains(&v) => Ok(v),
             Some(_) => Err(Misfit::OutOfRange),
             None => {
-                let digits = tok.strip_prefix(b"-").or_else(|| tok.strip_prefix(b"+")).unwrap_or(tok);
+                let digits = unsigned(tok);
                 if !digits.is_empty() && digits.iter().all(u8::is_ascii_digit) {
                     Err(Misfit::OutOfRange) // beyond even i64
                 } else if parse_f64(tok).is_some() {
@@ -134,8 +134,7 @@ impl Scalar {
             self == Scalar::F64 || (v as f32).is_finite()
         } else {
             // `inf`, `nan` (spelt out) rather than digits that overflowed (`1e400`).
-            let unsigned = tok.strip_prefix(b"-").or_else(|| tok.strip_prefix(b"+")).unwrap_or(tok);
-            unsigned.first().is_some_and(u8::is_ascii_alphabetic)
+            unsigned(tok).first().is_some_and(u8::is_ascii_alphabetic)
         };
         if fits {
             Ok(v)
@@ -175,6 +174,11 @@ impl Scalar {
     fn read_i64(self, b: &[u8], big: bool) -> i64 {
         self.read_f64(b, big) as i64
     }
+}
+
+/// `tok` without a leading sign.
+fn unsigned(tok: &[u8]) -> &[u8] {
+    tok.strip_prefix(b"-").or_else(|| tok.strip_prefix(b"+")).unwrap_or(tok)
 }
 
 /// Why an ASCII value does not fit its property's declared type.
@@ -288,8 +292,7 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                 };
                 match t.next() {
                     // `1`, `1.0`, `1.00`: the one version there is, however it is written.
-                    Some(v)
-                        if std::str::from_utf8(v).ok().and_then(|v| v.parse::<f64>().ok()) == Some(1.0) => {}
+                    Some(v) if parse_f64(v) == Some(1.0) => {}
                     Some(v) => {
                         return Err(Error::parse(
                             name,
@@ -456,10 +459,8 @@ impl<'a> Cursor<'a> {
             return Ok(t.read_f64(b, big));
         }
         let tok = self.next_token().ok_or_else(|| eof(name, what))?;
-        t.text_real(tok).map_err(|m| {
-            let msg = m.describe(t, tok, &format_args!("property '{prop}'"), "bad number");
-            Error::parse(name, self.line(), format!("{what}: {msg}"))
-        })
+        t.text_real(tok)
+            .map_err(|m| self.misfit(m, t, tok, name, what, &format_args!("property '{prop}'"), "bad number"))
     }
 
     /// One integer of property `prop`; in ASCII within the declared type's range.
@@ -471,9 +472,25 @@ impl<'a> Cursor<'a> {
         }
         let tok = self.next_token().ok_or_else(|| eof(name, what))?;
         t.text_int(tok).map_err(|m| {
-            let msg = m.describe(t, tok, &format_args!("property '{prop}'"), "bad integer");
-            Error::parse(name, self.line(), format!("{what}: {msg}"))
+            self.misfit(m, t, tok, name, what, &format_args!("property '{prop}'"), "bad integer")
         })
+    }
+
+    /// The error for an ASCII value `tok` of type `t` that does not fit it: on the
+    /// current line, after `what`; `subject` names the value, `bad` words a token that
+    /// is no number at all.
+    #[allow(clippy::too_many_arguments)]
+    fn misfit(
+        &self,
+        m: Misfit,
+        t: Scalar,
+        tok: &[u8],
+        name: &str,
+        what: &dyn std::fmt::Display,
+        subject: &dyn std::fmt::Display,
+        bad: &str,
+    ) -> Error {
+        Error::parse(name, self.line(), format!("{what}: {}", m.describe(t, tok, subject, bad)))
     }
 
     /// Skips `n` values of type `t` (of property `prop`). In ASCII each must still
@@ -494,13 +511,8 @@ impl<'a> Cursor<'a> {
             let tok = self.next_token().ok_or_else(|| eof(name, what))?;
             t.text_real(tok).map_err(|m| {
                 let bad = if t.is_int() { "bad integer" } else { "bad number" };
-                let msg = m.describe(
-                    t,
-                    tok,
-                    &format_args!("property '{prop}'"),
-                    &format!("property '{prop}': {bad}"),
-                );
-                Error::parse(name, self.line(), format!("{what}: {msg}"))
+                let subject = format!("property '{prop}'");
+                self.misfit(m, t, tok, name, what, &subject, &format!("{subject}: {bad}"))
             })?;
         }
         Ok(())
@@ -533,9 +545,8 @@ impl<'a> Cursor<'a> {
                 match parse_i64(tok) {
                     Some(n) if n < 0 => n,
                     _ => count.text_int(tok).map_err(|m| {
-                        let subject = format!("the list count of property '{prop}'");
-                        let msg = m.describe(count, tok, &subject, "bad integer");
-                        Error::parse(name, self.line(), format!("{what}: {msg}"))
+                        let subject = format_args!("the list count of property '{prop}'");
+                        self.misfit(m, count, tok, name, what, &subject, "bad integer")
                     })?,
                 }
             }

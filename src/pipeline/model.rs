@@ -172,9 +172,9 @@ impl ModelConfig {
     /// file, so a file holding fewer values than this cannot be this config's
     /// ([`Model::from_checkpoint`] checks it before allocating anything).
     pub fn min_weights(&self) -> u64 {
-        let chain = |cin: usize, widths: &[usize], out: usize| -> u64 {
+        let chain = |cin: u64, widths: &[usize], out: usize| -> u64 {
             let mut total = 0u64;
-            let mut c = cin as u64;
+            let mut c = cin;
             for &w in widths.iter().chain(std::iter::once(&out)) {
                 total = total.saturating_add(c.saturating_mul(w as u64));
                 c = w as u64;
@@ -183,11 +183,11 @@ impl ModelConfig {
         };
         let w = &self.face_widths;
         // The face encoder's five layers and its residual block's two w1 × w1 convs.
-        let face = chain(self.face_in(), &w[..4], w[4])
+        let face = chain(self.face_in() as u64, &w[..4], w[4])
             .saturating_add((w[1] as u64).saturating_mul(w[1] as u64).saturating_mul(2));
         let cls_in = (w[4] as u64).saturating_add((self.point_dim as u64).saturating_mul(4));
-        let cls = chain(usize::try_from(cls_in).unwrap_or(usize::MAX), &self.classifier_widths, 2);
-        let round = chain(self.refine_input.dim(), &self.refine_widths, 2);
+        let cls = chain(cls_in, &self.classifier_widths, 2);
+        let round = chain(self.refine_input.dim() as u64, &self.refine_widths, 2);
         let rounds = round.saturating_mul(self.refine_rounds as u64);
         // The point encoder (as `kpfcnn::plan` lays it out): its Simple block's KPConv,
         // K · input features · f / 2 weights (f the first width), and for every further

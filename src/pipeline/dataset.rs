@@ -420,6 +420,32 @@ pub fn load_sample(path: &Path) -> Result<Sample> {
     read_sample(&bytes, &path.display().to_string())
 }
 
+/// Separator of a noise variant's number in a sample name: `point2quad dataset
+/// --noise-variants N` writes, besides sample `NAME`, the samples `NAME~2` … `NAME~N`:
+/// the same mesh with other noise points (another random draw), hence other candidates.
+/// Sample names never hold it otherwise (file stems are sanitised to `[A-Za-z0-9._-]`).
+pub const VARIANT_SEP: char = '~';
+
+/// The sample a noise variant was drawn for, and the variant's number: `("NAME", v)`
+/// for `NAME~v` (v ≥ 2), `(name, 1)` for any other name (the sample itself).
+pub fn noise_variant(name: &str) -> (&str, usize) {
+    if let Some((base, digits)) = name.rsplit_once(VARIANT_SEP) {
+        // Only the canonical spelling (`~2`, not `~02` or `~+2`): one name per variant.
+        if let Ok(v) = digits.parse::<usize>() {
+            if v >= 2 && digits == v.to_string() && !base.is_empty() {
+                return (base, v);
+            }
+        }
+    }
+    (name, 1)
+}
+
+/// The random generator of noise variant `variant` (≥ 2) of sample `index`: a stream of
+/// its own, so the variant's noise is independent of the sample's and of the others'.
+pub fn variant_rng(seed: u64, index: usize, variant: usize) -> Rng {
+    Rng::new(seed ^ 0x6E6F_6973_6576_6172).fork(index as u64).fork(variant as u64)
+}
+
 /// The random generator of sample `index` of a dataset made with `seed`: independent
 /// streams per index, so samples do not depend on each other or on thread scheduling.
 pub fn sample_rng(seed: u64, index: usize) -> Rng {

@@ -21,7 +21,10 @@
 //! the frame's origin, the cloud's centroid; grid subsampling is not rotation invariant,
 //! so the pyramid is rebuilt every step). Fresh noise points per epoch would need new
 //! candidates (about a second per 10k-point cloud), so noise comes from the dataset
-//! (`point2quad dataset` draws it per sample).
+//! (`point2quad dataset` draws it per sample); a dataset written with
+//! `--noise-variants N` holds N draws of each sample (`NAME`, `NAME~2`, …), and epoch e
+//! trains on draw e mod N of each ([`variant_groups`]), so the noise changes from one
+//! epoch to the next at the cost of one sample per step.
 //!
 //! With a point encoder each step runs the KPFCNN over all the sample's points (batch
 //! norm in train mode over them) and gathers the features of the drawn candidates'
@@ -33,7 +36,7 @@ use crate::nn::loss::{face_loss, weighted_cross_entropy};
 use crate::nn::optim::{ExpDecay, Sgd, SgdConfig};
 use crate::pipeline::augment::{self, Augmentation, SampleGeometry};
 use crate::pipeline::candidates::CandidateConfig;
-use crate::pipeline::dataset::Sample;
+use crate::pipeline::dataset::{noise_variant, Sample};
 use crate::pipeline::model::{check_corners, corner_indices, Model};
 use crate::rng::Rng;
 use crate::tensor::{Grads, Graph, Tensor};
@@ -276,6 +279,11 @@ pub fn train(
     if usable.is_empty() {
         return Err(Error::invalid("no training sample has two or more candidates"));
     }
+    // Noise variants of one sample (`NAME`, `NAME~2`, …) are one group, and an epoch
+    // takes one of each group, in turn: fresh noise points every epoch at the cost of
+    // one sample. Without variants every group is one sample, so the epochs (and the
+    // random draws) are exactly those of a dataset without the option.
+    let groups = variant_groups(train, &usable);
     // Moving points needs each sample's neighbours, normals and spacing: built once
     // (deterministic, no RNG), so a resumed run rebuilds the same.
     let moves_points = cfg.scale.is_some() || cfg.jitter > 0.0;
@@ -304,7 +312,7 @@ pub fn train(
     for epoch in start_epoch..cfg.epochs {
         let t0 = std::time::Instant::now();
         let lr = schedule.lr(epoch as f64);
-        let mut order = usable.clone();
+        let mut order: Vec<usize> = groups.iter().map(|g| g[epoch % g.len()]).collect();
         rng.shuffle(&mut order);
         let mut loss_sum = 0.0;
         for (step, &si) in order.iter().enumerate() {
@@ -411,6 +419,30 @@ pub fn train(
         reports.push(report);
     }
     Ok(reports)
+}
+
+/// The samples of `usable` (indices into `samples`) grouped by the sample their noise
+/// variant was drawn for ([`noise_variant`]): groups in the order of their first member,
+/// members by variant number. Only the members' variant numbers order a group, so the
+/// order of the samples within the slice does not matter.
+pub fn variant_groups(samples: &[Sample], usable: &[usize]) -> Vec<Vec<usize>> {
+    let mut at: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
+    let mut groups: Vec<Vec<(usize, usize)>> = Vec::new();
+    for &i in usable {
+        let (base, v) = noise_variant(&samples[i].name);
+        let g = *at.entry(base).or_insert_with(|| {
+            groups.push(Vec::new());
+            groups.len() - 1
+        });
+        groups[g].push((v, i));
+    }
+    groups
+        .into_iter()
+        .map(|mut g| {
+            g.sort_unstable();
+            g.into_iter().map(|(_, i)| i).collect()
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -12,7 +12,8 @@ use point2quad::mesh::coarsen::{coarsen as coarsen_mesh, CoarsenConfig};
 use point2quad::mesh::poly::QuadMesh;
 use point2quad::pipeline::candidates::CandidateConfig;
 use point2quad::pipeline::dataset::{
-    build_sample, index_line, sample_rng, save_sample, stretch_mesh, synthetic_mesh_with_aspect, EXTENSION,
+    build_sample, index_line, sample_rng, save_sample, stretch_mesh, synthetic_mesh_with_aspect, variant_rng,
+    EXTENSION, VARIANT_SEP,
 };
 use point2quad::pipeline::noise::NoiseConfig;
 use point2quad::{par, Error, Result};
@@ -55,6 +56,13 @@ OPTIONS:
     --noise F         noise points per mesh vertex (default 0.1; at most 100)
     --offset F        largest noise offset along the face normal, as a fraction of
                       the face's mean edge length (default 0.1; at most 100)
+    --noise-variants N
+                      N draws of the noise points per sample (1 to 16; default 1):
+                      besides sample NAME, samples NAME~2 ... NAME~N of the same
+                      mesh with other noise points, hence other candidates. `train`
+                      trains on one draw of each per epoch, in turn (fresh noise
+                      every epoch at the cost of one); its validation and `refine`
+                      read NAME only. N times the files, time and training memory
     --seed S          random seed (default 0); the same seed gives the same files
     --continue-rank R lattice continuation in the candidates, as `reconstruct
                       --continue-rank` (0 turns it off; 0 to 1000) [2]
@@ -79,6 +87,9 @@ const MAX_NOISE: f64 = 100.0;
 /// Most values `--coarsen` and `--stretch` each take (each adds a copy of every mesh).
 const MAX_COPIES: usize = 8;
 
+/// Largest `--noise-variants`: each draw repeats the whole dataset's work and files.
+const MAX_NOISE_VARIANTS: usize = 16;
+
 /// Largest `--stretch` factor: beyond ten to one the quads are needles.
 const MAX_STRETCH: f64 = 10.0;
 
@@ -93,6 +104,9 @@ enum Job {
     /// A mesh file, stretched by `--stretch` (largest factor), and the sample name
     /// (`NAME@s`, `NAME@s2`, ...).
     Stretch(PathBuf, String, f64),
+    /// Another draw of the noise points of job `.0` (an index into the jobs): the same
+    /// mesh, variant number `.1` (≥ 2), sample name `NAME~v` for that job's `NAME`.
+    Variant(usize, usize),
 }
 
 /// The comma-separated numbers of `--{flag}` (at most `MAX_COPIES`), each
@@ -142,6 +156,7 @@ pub fn run(argv: &[String]) -> Result<()> {
             "--coarsen",
             "--stretch",
             "--min-aspect",
+            "--noise-variants",
         ],
         switches: &["--bumpy"],
     };
@@ -194,6 +209,14 @@ pub fn run(argv: &[String]) -> Result<()> {
             Err(format!("stretch factors, 1 < F <= {MAX_STRETCH}"))
         }
     })?;
+    let noise_variants: usize = args.parsed_in(
+        CMD,
+        "--noise-variants",
+        1,
+        1,
+        MAX_NOISE_VARIANTS,
+        "each draw adds a file per sample",
+    )?;
     let noise = NoiseConfig {
         fraction: args.parsed(CMD, "--noise", NoiseConfig::default().fraction)?,
         offset: args.parsed(CMD, "--offset", NoiseConfig::default().offset)?,
@@ -234,6 +257,12 @@ pub fn run(argv: &[String]) -> Result<()> {
             jobs.extend(plain.iter().map(|(p, n)| Job::Stretch(p.clone(), format!("{n}{suffix}"), factor)));
         }
     }
+    // After every other job, so each of those keeps its index, hence its random stream
+    // and its bytes, with or without --noise-variants.
+    let base_jobs = jobs.len();
+    for v in 2..=noise_variants {
+        jobs.extend((0..base_jobs).map(|k| Job::Variant(k, v)));
+    }
     if jobs.is_empty() {
         return Err(Error::Usage(format!(
             "{CMD}: nothing to do: give --synthetic N (N > 0) and/or --meshes DIR with .obj/.off/.ply files"
@@ -259,7 +288,13 @@ pub fn run(argv: &[String]) -> Result<()> {
     let total = jobs.len();
     let done = AtomicUsize::new(0);
     let results: Vec<Result<Option<String>>> = par::map(total, |k| {
-        let (name, mesh, mut rng) = match &jobs[k] {
+        // A noise variant builds its job's mesh exactly as that job does, then draws
+        // the noise from a stream of its own.
+        let (k, variant) = match jobs[k] {
+            Job::Variant(of, v) => (of, Some(v)),
+            _ => (k, None),
+        };
+        let (name, mesh, rng) = match &jobs[k] {
             Job::Synthetic(i) => synthetic_mesh_with_aspect(seed, *i, bumpy, min_aspect),
             Job::File(path, name) | Job::Coarse(path, name, _) | Job::Stretch(path, name, _) => {
                 let mesh = match load_quads(path) {
@@ -287,6 +322,11 @@ pub fn run(argv: &[String]) -> Result<()> {
                 };
                 (name.clone(), mesh, rng)
             }
+            Job::Variant(..) => return Err(Error::invalid("dataset: a noise variant of a noise variant")),
+        };
+        let (name, mut rng) = match variant {
+            Some(v) => (format!("{name}{VARIANT_SEP}{v}"), variant_rng(seed, k, v)),
+            None => (name, rng),
         };
         let sample = match (build_sample(&name, &mesh, &noise, &cand_cfg, &mut rng), &jobs[k]) {
             (Ok(s), _) => s,
@@ -304,7 +344,7 @@ pub fn run(argv: &[String]) -> Result<()> {
                 say!("[{n}/{total}] warning: skipping {}: {why}", path.display());
                 return Ok(None);
             }
-            (Err(e), Job::Synthetic(_)) => return Err(e),
+            (Err(e), Job::Synthetic(_) | Job::Variant(..)) => return Err(e),
         };
         let file = format!("{name}.{EXTENSION}");
         save_sample(&out.join(&file), &sample)?;

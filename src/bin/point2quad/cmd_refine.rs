@@ -5,6 +5,7 @@ use crate::args::{Args, Spec};
 use crate::cmd_train::{fold_of, load_dir, parent_name, Split, MAX_FOLDS};
 use crate::output::say;
 use point2quad::nn::checkpoint;
+use point2quad::pipeline::dataset::noise_variant;
 use point2quad::pipeline::model::{Model, MAX_REFINE_ROUNDS};
 use point2quad::pipeline::refine::{
     train_refiner, RefineInput, RefineProgress, RefineSample, RefineTrainConfig, SideRule,
@@ -162,7 +163,15 @@ pub fn run(argv: &[String]) -> Result<()> {
     let mut model = base.with_refinement_reading(rounds, &widths, sides, input, cfg.seed)?;
 
     let t0 = std::time::Instant::now();
-    let samples = load_dir(cmd, &data)?;
+    let mut samples = load_dir(cmd, &data)?;
+    // The rounds train on each sample's first noise draw (`NAME`; `NAME~2`, … of
+    // `dataset --noise-variants` are left out), so their time and figures stay those of
+    // the dataset without variants (a choice, not measured against using them all).
+    let drawn = samples.len();
+    samples.retain(|s| noise_variant(&s.name).1 == 1);
+    if samples.len() < drawn {
+        say!("refine: {} further noise draws (NAME~2, ...) left out: the rounds read each sample's first", drawn - samples.len());
+    }
     check_samples(&samples, &base)?;
     for m in &fold_models {
         check_samples(&samples, m)?;

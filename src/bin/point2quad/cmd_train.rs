@@ -4,7 +4,7 @@
 use crate::args::{Args, Spec};
 use crate::output::say;
 use point2quad::nn::checkpoint::{self, Checkpoint};
-use point2quad::pipeline::dataset::{load_sample, Sample, EXTENSION};
+use point2quad::pipeline::dataset::{load_sample, noise_variant, Sample, EXTENSION, VARIANT_SEP};
 use point2quad::pipeline::model::{Model, ModelConfig};
 use point2quad::pipeline::train::{train, Progress, TrainConfig};
 use point2quad::{Error, Result};
@@ -179,10 +179,11 @@ impl Split {
     }
 }
 
-/// The mesh a sample was made from: the name up to the first `@` (sample names of
-/// `dataset` never hold one otherwise: file stems are sanitised to `[A-Za-z0-9._-]`).
+/// The mesh a sample was made from: the name up to the first `@` (a copy, `NAME@c`) or
+/// `~` (a noise variant, `NAME~2`; sample names of `dataset` never hold either otherwise:
+/// file stems are sanitised to `[A-Za-z0-9._-]`).
 pub(crate) fn parent_name(name: &str) -> &str {
-    name.split('@').next().unwrap_or(name)
+    name.split(['@', VARIANT_SEP]).next().unwrap_or(name)
 }
 
 /// Whether the sample called `name` is in the validation part: by a hash of the name,
@@ -375,10 +376,16 @@ pub fn run(argv: &[String]) -> Result<()> {
     let samples = load_dir(cmd, &data)?;
     split.check_names(cmd, samples.iter().map(|s| s.name.as_str()))?;
     let (mut tr, mut va): (Vec<Sample>, Vec<Sample>) = (Vec::new(), Vec::new());
+    let mut extra_draws = 0;
     for s in samples {
         if split.is_validation(&s.name) {
-            va.push(s);
+            // Validation reads each sample's first noise draw only (`NAME`, not
+            // `NAME~2`): the figures stay those of a dataset without variants.
+            if noise_variant(&s.name).1 == 1 {
+                va.push(s);
+            }
         } else {
+            extra_draws += usize::from(noise_variant(&s.name).1 > 1);
             tr.push(s);
         }
     }
@@ -386,9 +393,14 @@ pub fn run(argv: &[String]) -> Result<()> {
         return Err(Error::Usage("train: every sample fell into validation; lower --val-fraction".into()));
     }
     let cands: usize = tr.iter().map(|s| s.labels.len()).sum();
+    let draws = if extra_draws > 0 {
+        format!(" (and {extra_draws} more noise draws of them: one draw of each per epoch)")
+    } else {
+        String::new()
+    };
     say!(
-        "train: {} training / {} validation samples ({cands} training candidates) loaded in {:.1}s; model '{}' with {} parameters",
-        tr.len(),
+        "train: {} training{draws} / {} validation samples ({cands} training candidates) loaded in {:.1}s; model '{}' with {} parameters",
+        tr.len() - extra_draws,
         va.len(),
         t0.elapsed().as_secs_f64(),
         model.config().preset,

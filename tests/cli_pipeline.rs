@@ -943,3 +943,52 @@ fn reconstruct_warns_when_most_points_are_no_faces_corner() {
     let err = String::from_utf8_lossy(&ok(&["reconstruct", &quad, "-o", &s.p("b.obj")]).stderr).to_string();
     assert!(!err.contains("warning"), "{err}");
 }
+
+/// `dataset --noise-variants N`: the plain samples stay byte for byte, each gets N − 1
+/// more draws `NAME~v` of the same mesh with other noise points; `train` counts them
+/// apart, holds them out with their mesh and validates on the first draw only; `refine`
+/// leaves them out. Bad counts are usage errors naming the option.
+#[test]
+fn dataset_noise_variants_draw_the_noise_again_and_split_with_their_mesh() {
+    let s = Scratch::new("variants");
+    let meshes = s.p("meshes");
+    write_meshes(&meshes);
+    let (plain, var) = (s.p("plain"), s.p("var"));
+    ok(&["dataset", "--meshes", &meshes, "--synthetic", "1", "--out", &plain, "--seed", "3"]);
+    ok(&["dataset", "--meshes", &meshes, "--synthetic", "1", "--out", &var, "--seed", "3", "--noise-variants", "3"]);
+    let (pf, vf) = (sample_files(&plain), sample_files(&var));
+    assert_eq!(vf.len(), 3 * pf.len(), "{vf:?}");
+    let load = |d: &str, f: &str| point2quad::pipeline::dataset::load_sample(&Path::new(d).join(f)).unwrap();
+    for f in &pf {
+        let read = |d: &str| std::fs::read(Path::new(d).join(f)).unwrap();
+        assert_eq!(read(&plain), read(&var), "{f}: a plain sample changed with --noise-variants");
+        let p = load(&plain, f);
+        let stem = f.trim_end_matches(".p2qs");
+        for v in [2, 3] {
+            let d = load(&var, &format!("{stem}~{v}.p2qs"));
+            assert_eq!(d.name, format!("{stem}~{v}"));
+            // The same mesh, other noise points.
+            assert_eq!(d.gt_faces, p.gt_faces, "{stem}~{v}");
+            assert_eq!(d.n_mesh_vertices, p.n_mesh_vertices);
+            assert_ne!(d.points[d.n_mesh_vertices as usize..], p.points[p.n_mesh_vertices as usize..], "{stem}~{v}");
+        }
+    }
+    // Held out with its mesh: b_torus and its two draws leave training; validation reads one.
+    let model = s.p("m.p2qm");
+    let args = ["train", "--data", &var, "--out", &model, "--epochs", "1", "--max-candidates", "300"];
+    let out = ok(&[&args[..], &["--val-fraction", "0", "--hold-out", "b_torus"]].concat());
+    let err = String::from_utf8_lossy(&out.stderr);
+    let want = format!("{} training (and {} more noise draws of them", pf.len() - 1, 2 * (pf.len() - 1));
+    assert!(err.contains(&want), "want {want:?} in {err}");
+    assert!(err.contains(" / 1 validation samples"), "{err}");
+    let out = ok(&["refine", "--data", &var, "--model", &model, "--out", &s.p("r.p2qm"), "--rounds", "1", "--epochs", "1", "--hold-out", "b_torus"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(&format!("{} further noise draws", 2 * pf.len())), "{err}");
+    assert!(err.contains(&format!("{} training / 1 validation samples", pf.len() - 1)), "{err}");
+    let never = s.p("never");
+    for b in ["0", "17", "x", "-1", "2.5"] {
+        let e = fails(&["dataset", "--synthetic", "1", "--out", &never, "--noise-variants", b], 2);
+        assert!(e.contains("--noise-variants"), "{b}: {e}");
+    }
+    assert!(!Path::new(&never).exists());
+}

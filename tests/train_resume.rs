@@ -94,3 +94,53 @@ fn tiny_batches_are_refused_or_skipped() {
     let e = train(&mut model, &data, &[], &tiny, None, &mut no_progress, &mut ok).unwrap_err().to_string();
     assert!(e.contains("at least 2"), "{e}");
 }
+
+/// Noise variants (`NAME~2`, … of `dataset --noise-variants`): an epoch trains on one
+/// draw of each sample, in turn. Variants that are exact copies of their sample train
+/// exactly as the plain set (same steps, same random draws; the positive weight fixed,
+/// since by default it counts every draw's labels); a variant that differs is read in the
+/// second epoch, and only there.
+#[test]
+fn noise_variants_are_one_sample_per_epoch_in_turn() {
+    let data = samples();
+    let (a, b) = (data[0].clone(), data[1].clone());
+    let fixed = |epochs| TrainConfig { pos_weight: Some(3.0), ..cfg(epochs) };
+    let mut ok = |_: &Model, _: &TrainState| -> Result<()> { Ok(()) };
+    let named = |s: &point2quad::pipeline::dataset::Sample, n: &str| {
+        let mut s = s.clone();
+        s.name = n.to_string();
+        s
+    };
+    let run = |set: &[point2quad::pipeline::dataset::Sample], epochs: usize| {
+        let mut m = Model::new(ModelConfig::default_preset(), 1).unwrap();
+        let mut ok = |_: &Model, _: &TrainState| -> Result<()> { Ok(()) };
+        let reps = train(&mut m, set, &[], &fixed(epochs), None, &mut no_progress, &mut ok).unwrap();
+        (bits(&m), reps)
+    };
+    let plain = run(&[a.clone(), b.clone()], 2);
+    // Copies as variants, members in any order (the groups keep the order of their
+    // first members): the plain run, bit for bit.
+    let a2 = named(&a, &format!("{}~2", a.name));
+    let b3 = named(&b, &format!("{}~3", b.name));
+    let b2 = named(&b, &format!("{}~2", b.name));
+    let copies = run(&[a.clone(), b3, a2, b.clone(), b2], 2);
+    assert_eq!(copies.0, plain.0);
+    assert_eq!(copies.1.len(), 2);
+    // A variant of A that holds B's data: epoch 1 reads A, epoch 2 reads the variant.
+    let other = named(&b, &format!("{}~2", a.name));
+    let one_epoch = run(&[a.clone(), other.clone(), b.clone()], 1);
+    assert_eq!(one_epoch.0, run(&[a.clone(), b.clone()], 1).0, "epoch 1 must read the first draw");
+    let mut m = Model::new(ModelConfig::default_preset(), 1).unwrap();
+    let mut states = Vec::new();
+    train(&mut m, &[a.clone(), b.clone()], &[], &fixed(1), None, &mut no_progress, &mut |_, st| {
+        states.push(st.clone());
+        Ok(())
+    })
+    .unwrap();
+    // Epoch 2 by hand: resume with the variant in A's place (named A, so the group is A's).
+    let swapped = named(&b, &a.name);
+    train(&mut m, &[swapped, b.clone()], &[], &fixed(2), states.pop(), &mut no_progress, &mut ok).unwrap();
+    let two_epochs = run(&[a.clone(), other, b.clone()], 2);
+    assert_eq!(two_epochs.0, bits(&m), "epoch 2 must read the second draw");
+    assert_ne!(two_epochs.0, plain.0);
+}

@@ -560,6 +560,21 @@ mod tests {
     }
 
     #[test]
+    fn noise_variant_names_parse_only_their_canonical_spelling() {
+        assert_eq!(noise_variant("qm_monkey~2"), ("qm_monkey", 2));
+        assert_eq!(noise_variant("qm_monkey@c~13"), ("qm_monkey@c", 13));
+        assert_eq!(noise_variant("syn_00001_cube"), ("syn_00001_cube", 1));
+        for plain in ["a~1", "a~0", "a~02", "a~+2", "~2", "a~", "a~x", "a~2x", "a~-2"] {
+            assert_eq!(noise_variant(plain), (plain, 1), "{plain}");
+        }
+        // Distinct streams per variant and per sample.
+        let draw = |i, v| variant_rng(7, i, v).next_u64();
+        assert_ne!(draw(0, 2), draw(0, 3));
+        assert_ne!(draw(0, 2), draw(1, 2));
+        assert_ne!(draw(0, 2), sample_rng(7, 0).next_u64());
+    }
+
+    #[test]
     fn labels_match_any_cyclic_order_or_orientation() {
         let gt = [[0, 1, 2, 3], [2, 3, 4, 5]];
         let c = [[3, 2, 1, 0], [1, 2, 3, 0], [0, 2, 1, 3], [5, 4, 3, 2], [0, 1, 2, 4], [0, 0, 1, 2]];

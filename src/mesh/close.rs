@@ -267,16 +267,6 @@ fn is_hole(pos: &[[f64; 3]], vs: &[u32], across: &[Option<[f64; 3]>], cfg: &Clos
     }
 }
 
-/// Whether the boundary loop `lp` (its half-edges, in order) is a hole in the surface
-/// by [`close_holes`]' test ([`CloseConfig::min_loop_coherence`],
-/// [`CloseConfig::min_loop_alignment`]), not the open end of a tube or the outer border of
-/// a sheet. The rescue asks it too ([`crate::mesh::rescue::rescue_faces_at_holes`]).
-pub fn loop_is_hole(mesh: &HalfedgeMesh, pos: &[[f64; 3]], lp: &[HalfedgeId], cfg: &CloseConfig) -> bool {
-    let vs: Vec<u32> = lp.iter().map(|&h| mesh.from_vertex(h).0).collect();
-    let across: Vec<Option<[f64; 3]>> = lp.iter().map(|&h| normal_across(mesh, pos, h)).collect();
-    is_hole(pos, &vs, &across, cfg)
-}
-
 /// Unit normal of the face across boundary half-edge `h`, if any.
 fn normal_across(mesh: &HalfedgeMesh, pos: &[[f64; 3]], h: HalfedgeId) -> Option<[f64; 3]> {
     let f = mesh.face(h.opposite())?;

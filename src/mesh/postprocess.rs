@@ -14,7 +14,7 @@ use super::halfedge::{corner_set, same_cycle, HalfedgeMesh, InsertOutcome};
 use super::hole_fill::{fill_holes, quad_normal, HoleFillConfig, HoleFillReport};
 use super::poly::QuadMesh;
 use super::quality::is_degenerate_quad;
-use super::rescue::{remove_small_open_components, rescue_faces, rescue_faces_at_holes, RescueConfig};
+use super::rescue::{remove_small_open_components, rescue_faces, RescueConfig};
 use super::soup::FaceSoup;
 use crate::error::{Error, Result};
 use crate::math::{cross, dot};
@@ -500,11 +500,7 @@ pub fn postprocess_with_reserve(
                 all_p.push(p);
             }
         }
-        report.rescued = if cfg.rescue.holes_only {
-            rescue_faces_at_holes(&mut mesh, &pos, &all, &all_p, &pool, &cfg.rescue, &cfg.close).len()
-        } else {
-            rescue_faces(&mut mesh, &all, &all_p, &pool, &cfg.rescue).len()
-        };
+        report.rescued = rescue_faces(&mut mesh, &all, &all_p, &pool, &cfg.rescue).len();
     }
     report.close = close_holes(&mut mesh, &pos, &cfg.close);
     if cfg.fill_holes && (report.rescued > 0 || report.close.quads_added > 0) {

@@ -13,7 +13,6 @@
 
 use std::collections::HashMap;
 
-use super::close::{loop_is_hole, CloseConfig};
 use super::halfedge::HalfedgeMesh;
 use super::handles::{FaceId, VertexId};
 
@@ -30,14 +29,11 @@ pub struct RescueConfig {
     pub min_glued: usize,
     /// Passes over the boundary; each inserts what fits, the next sees the new border.
     pub max_passes: usize,
-    /// Whether the post-process rescues only at loops that are holes by the closing's
-    /// test ([`rescue_faces_at_holes`]), so open tube ends and sheet borders stay open.
-    pub holes_only: bool,
 }
 
 impl Default for RescueConfig {
     fn default() -> Self {
-        RescueConfig { enabled: true, min_prob: 0.1, min_glued: 2, max_passes: 16, holes_only: true }
+        RescueConfig { enabled: true, min_prob: 0.1, min_glued: 2, max_passes: 16 }
     }
 }
 
@@ -68,8 +64,7 @@ pub fn remove_small_open_components(mesh: &mut HalfedgeMesh, max_faces: usize) -
 
 /// Inserts candidates from `pool` (indices into `faces`/`probs`) at the mesh's holes, as
 /// the module documentation says. Candidates below `cfg.min_prob`, or already in the mesh,
-/// are ignored. Returns the indices inserted, in insertion order. Every boundary loop
-/// counts as a hole here; [`rescue_faces_at_holes`] asks the closing's test first.
+/// are ignored. Returns the indices inserted, in insertion order.
 ///
 /// # Panics
 /// If an index of `pool` is out of range of `faces` or `probs`, or a face's vertex is not
@@ -80,36 +75,6 @@ pub fn rescue_faces(
     probs: &[f32],
     pool: &[usize],
     cfg: &RescueConfig,
-) -> Vec<usize> {
-    rescue_where(mesh, faces, probs, pool, cfg, None)
-}
-
-/// [`rescue_faces`] on the loops that are holes by the closing's test
-/// ([`loop_is_hole`] with `close`'s bounds, asked again in every pass): the open end of
-/// a tube and the outer border of a sheet get no candidate, so they are not capped.
-/// `pos` holds one position per mesh vertex.
-///
-/// # Panics
-/// As [`rescue_faces`], or if a vertex of `mesh` has no entry in `pos`.
-pub fn rescue_faces_at_holes(
-    mesh: &mut HalfedgeMesh,
-    pos: &[[f64; 3]],
-    faces: &[[u32; 4]],
-    probs: &[f32],
-    pool: &[usize],
-    cfg: &RescueConfig,
-    close: &CloseConfig,
-) -> Vec<usize> {
-    rescue_where(mesh, faces, probs, pool, cfg, Some((pos, close)))
-}
-
-fn rescue_where(
-    mesh: &mut HalfedgeMesh,
-    faces: &[[u32; 4]],
-    probs: &[f32],
-    pool: &[usize],
-    cfg: &RescueConfig,
-    holes: Option<(&[[f64; 3]], &CloseConfig)>,
 ) -> Vec<usize> {
     let mut inserted = Vec::new();
     if !cfg.enabled {
@@ -158,11 +123,6 @@ fn rescue_where(
     for pass in 1..=cfg.max_passes as u32 {
         let mut cands: Vec<(usize, f32, u32)> = Vec::new();
         for lp in mesh.boundary_loops() {
-            if let Some((pos, close)) = holes {
-                if !loop_is_hole(mesh, pos, &lp, close) {
-                    continue;
-                }
-            }
             for h in lp {
                 let (a, b) = (mesh.from_vertex(h).0, mesh.to_vertex(h).0);
                 let Some(list) = by_edge.get(&key(a, b)) else { continue };

@@ -955,7 +955,19 @@ fn dataset_noise_variants_draw_the_noise_again_and_split_with_their_mesh() {
     write_meshes(&meshes);
     let (plain, var) = (s.p("plain"), s.p("var"));
     ok(&["dataset", "--meshes", &meshes, "--synthetic", "1", "--out", &plain, "--seed", "3"]);
-    ok(&["dataset", "--meshes", &meshes, "--synthetic", "1", "--out", &var, "--seed", "3", "--noise-variants", "3"]);
+    ok(&[
+        "dataset",
+        "--meshes",
+        &meshes,
+        "--synthetic",
+        "1",
+        "--out",
+        &var,
+        "--seed",
+        "3",
+        "--noise-variants",
+        "3",
+    ]);
     let (pf, vf) = (sample_files(&plain), sample_files(&var));
     assert_eq!(vf.len(), 3 * pf.len(), "{vf:?}");
     let load = |d: &str, f: &str| point2quad::pipeline::dataset::load_sample(&Path::new(d).join(f)).unwrap();
@@ -970,7 +982,11 @@ fn dataset_noise_variants_draw_the_noise_again_and_split_with_their_mesh() {
             // The same mesh, other noise points.
             assert_eq!(d.gt_faces, p.gt_faces, "{stem}~{v}");
             assert_eq!(d.n_mesh_vertices, p.n_mesh_vertices);
-            assert_ne!(d.points[d.n_mesh_vertices as usize..], p.points[p.n_mesh_vertices as usize..], "{stem}~{v}");
+            assert_ne!(
+                d.points[d.n_mesh_vertices as usize..],
+                p.points[p.n_mesh_vertices as usize..],
+                "{stem}~{v}"
+            );
         }
     }
     // Held out with its mesh: b_torus and its two draws leave training; validation reads one.
@@ -981,7 +997,21 @@ fn dataset_noise_variants_draw_the_noise_again_and_split_with_their_mesh() {
     let want = format!("{} training (and {} more noise draws of them", pf.len() - 1, 2 * (pf.len() - 1));
     assert!(err.contains(&want), "want {want:?} in {err}");
     assert!(err.contains(" / 1 validation samples"), "{err}");
-    let out = ok(&["refine", "--data", &var, "--model", &model, "--out", &s.p("r.p2qm"), "--rounds", "1", "--epochs", "1", "--hold-out", "b_torus"]);
+    let out = ok(&[
+        "refine",
+        "--data",
+        &var,
+        "--model",
+        &model,
+        "--out",
+        &s.p("r.p2qm"),
+        "--rounds",
+        "1",
+        "--epochs",
+        "1",
+        "--hold-out",
+        "b_torus",
+    ]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains(&format!("{} further noise draws", 2 * pf.len())), "{err}");
     assert!(err.contains(&format!("{} training / 1 validation samples", pf.len() - 1)), "{err}");

@@ -170,7 +170,10 @@ pub fn run(argv: &[String]) -> Result<()> {
     let drawn = samples.len();
     samples.retain(|s| noise_variant(&s.name).1 == 1);
     if samples.len() < drawn {
-        say!("refine: {} further noise draws (NAME~2, ...) left out: the rounds read each sample's first", drawn - samples.len());
+        say!(
+            "refine: {} further noise draws (NAME~2, ...) left out: the rounds read each sample's first",
+            drawn - samples.len()
+        );
     }
     check_samples(&samples, &base)?;
     for m in &fold_models {

@@ -1015,6 +1015,24 @@ fn dataset_noise_variants_draw_the_noise_again_and_split_with_their_mesh() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains(&format!("{} further noise draws", 2 * pf.len())), "{err}");
     assert!(err.contains(&format!("{} training / 1 validation samples", pf.len() - 1)), "{err}");
+    // --draws all: the training part's draws all go to the rounds, validation's first only.
+    let r2 = s.p("r2.p2qm");
+    let base = ["refine", "--data", &var, "--model", &model, "--rounds", "1", "--epochs", "1"];
+    let refine = |extra: &[&str]| -> Vec<String> {
+        [&base[..], &["--hold-out", "b_torus", "--out", &r2], extra]
+            .concat()
+            .iter()
+            .map(|x| x.to_string())
+            .collect()
+    };
+    let args_all = refine(&["--draws", "all"]);
+    let out = ok(&args_all.iter().map(String::as_str).collect::<Vec<_>>());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("2 further noise draws (NAME~2, ...) left out: validation"), "{err}");
+    assert!(err.contains(&format!("{} training / 1 validation samples", 3 * (pf.len() - 1))), "{err}");
+    let args_bad = refine(&["--draws", "some"]);
+    let e = fails(&args_bad.iter().map(String::as_str).collect::<Vec<_>>(), 2);
+    assert!(e.contains("--draws"), "{e}");
     let never = s.p("never");
     for b in ["0", "17", "x", "-1", "2.5"] {
         let e = fails(&["dataset", "--synthetic", "1", "--out", &never, "--noise-variants", b], 2);

@@ -60,6 +60,11 @@ OPTIONS:
                           8 flow columns (the shipped weights since session 18; needs
                           --sides normals); base = the probability columns alone
                           (models refined before session 18) [flow]
+    --draws WHICH         samples of `dataset --noise-variants`: first = each sample's
+                          first noise draw only (NAME; NAME~2 ... left out); all = every
+                          draw, so the rounds also learn from BASE's scores on noise
+                          points it was not trained on (session 21's experiment).
+                          Validation reads first draws either way [first]
 ";
 
 const SPEC: Spec = Spec {
@@ -77,6 +82,7 @@ const SPEC: Spec = Spec {
         "--hold-out",
         "--sides",
         "--features",
+        "--draws",
         "--fold-models",
     ],
     switches: &[],
@@ -164,16 +170,28 @@ pub fn run(argv: &[String]) -> Result<()> {
 
     let t0 = std::time::Instant::now();
     let mut samples = load_dir(cmd, &data)?;
-    // The rounds train on each sample's first noise draw (`NAME`; `NAME~2`, … of
-    // `dataset --noise-variants` are left out), so their time and figures stay those of
-    // the dataset without variants (a choice, not measured against using them all).
+    // By default the rounds train on each sample's first noise draw (`NAME`; `NAME~2`, …
+    // of `dataset --noise-variants` are left out), so their time and figures stay those
+    // of the dataset without variants; `--draws all` keeps the training part's draws.
+    // Validation reads first draws either way.
+    let all_draws = match a.value("--draws").unwrap_or("first") {
+        "first" => false,
+        "all" => true,
+        other => {
+            return Err(Error::Usage(format!(
+                "{cmd}: --draws {other:?}: expected first or all (see `point2quad {cmd} --help`)"
+            )))
+        }
+    };
     let drawn = samples.len();
-    samples.retain(|s| noise_variant(&s.name).1 == 1);
+    samples.retain(|s| noise_variant(&s.name).1 == 1 || (all_draws && !split.is_validation(&s.name)));
     if samples.len() < drawn {
-        say!(
-            "refine: {} further noise draws (NAME~2, ...) left out: the rounds read each sample's first",
-            drawn - samples.len()
-        );
+        let why = if all_draws {
+            "validation reads each sample's first"
+        } else {
+            "the rounds read each sample's first"
+        };
+        say!("refine: {} further noise draws (NAME~2, ...) left out: {why}", drawn - samples.len());
     }
     check_samples(&samples, &base)?;
     for m in &fold_models {

@@ -1040,3 +1040,53 @@ fn dataset_noise_variants_draw_the_noise_again_and_split_with_their_mesh() {
     }
     assert!(!Path::new(&never).exists());
 }
+
+/// Session 21's review: a held-out copy takes its noise draws with it; a noise draw cannot
+/// be held out on its own; two files of one sample name are refused (splits and draw
+/// groups go by that name); mesh files whose names sanitise alike get samples apart.
+#[test]
+fn draws_follow_held_out_copies_and_sample_names_are_unique() {
+    let s = Scratch::new("draws_split");
+    let meshes = s.p("meshes");
+    write_meshes(&meshes);
+    let data = s.p("data");
+    ok(&[
+        "dataset",
+        "--meshes",
+        &meshes,
+        "--out",
+        &data,
+        "--seed",
+        "3",
+        "--coarsen",
+        "0.5",
+        "--noise-variants",
+        "2",
+    ]);
+    let files = sample_files(&data);
+    let bases = files.len() / 2;
+    assert!(files.iter().any(|f| f == "b_torus@c~2.p2qs"), "{files:?}");
+    let model = s.p("m.p2qm");
+    let train = ["train", "--data", &data, "--out", &model, "--epochs", "1", "--max-candidates", "300"];
+    let out = ok(&[&train[..], &["--val-fraction", "0", "--hold-out", "b_torus@c"]].concat());
+    let err = String::from_utf8_lossy(&out.stderr);
+    let want = format!("{} training (and {} more noise draws of them", bases - 1, bases - 1);
+    assert!(err.contains(&want), "b_torus@c~2 must leave training with b_torus@c: want {want:?} in {err}");
+    let e = fails(&[&train[..], &["--hold-out", "b_torus~2"]].concat(), 2);
+    assert!(e.contains("hold out b_torus instead"), "{e}");
+    // A copied sample file: one name twice.
+    std::fs::copy(Path::new(&data).join("a_sphere.p2qs"), Path::new(&data).join("zz_copy.p2qs")).unwrap();
+    let e = fails(&train, 2);
+    assert!(e.contains("a_sphere.p2qs") && e.contains("zz_copy.p2qs") && e.contains("one name"), "{e}");
+    // `x~2.obj` and `x_2.obj` both sanitise to `x_2`.
+    let odd = s.p("odd");
+    std::fs::create_dir_all(&odd).unwrap();
+    for n in ["x~2", "x_2"] {
+        std::fs::copy(Path::new(&meshes).join("b_torus.obj"), Path::new(&odd).join(format!("{n}.obj")))
+            .unwrap();
+    }
+    let out_dir = s.p("odd_data");
+    ok(&["dataset", "--meshes", &odd, "--out", &out_dir, "--seed", "3"]);
+    // Same stem: the extension tells them apart first, then a number.
+    assert_eq!(sample_files(&out_dir), vec!["x_2_obj.p2qs".to_string(), "x_2_obj_2.p2qs".to_string()]);
+}

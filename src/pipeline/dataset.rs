@@ -423,7 +423,7 @@ pub fn load_sample(path: &Path) -> Result<Sample> {
 /// Separator of a noise variant's number in a sample name: `point2quad dataset
 /// --noise-variants N` writes, besides sample `NAME`, the samples `NAME~2` … `NAME~N`:
 /// the same mesh with other noise points (another random draw), hence other candidates.
-/// Sample names never hold it otherwise (file stems are sanitised to `[A-Za-z0-9._-]`).
+/// Sample names never hold it otherwise (file stems are sanitised to letters, digits and `._-`).
 pub const VARIANT_SEP: char = '~';
 
 /// The sample a noise variant was drawn for, and the variant's number: `("NAME", v)`

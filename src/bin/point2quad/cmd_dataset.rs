@@ -60,9 +60,9 @@ OPTIONS:
                       N draws of the noise points per sample (1 to 16; default 1):
                       besides sample NAME, samples NAME~2 ... NAME~N of the same
                       mesh with other noise points, hence other candidates. `train`
-                      trains on one draw of each per epoch, in turn (fresh noise
-                      every epoch at the cost of one); its validation and `refine`
-                      read NAME only. N times the files, time and training memory
+                      trains on one of the N draws of each per epoch, in turn (at the
+                      cost of one); its validation, and `refine` unless `--draws
+                      all`, read NAME only. N times the files, time and memory
     --seed S          random seed (default 0); the same seed gives the same files
     --continue-rank R lattice continuation in the candidates, as `reconstruct
                       --continue-rank` (0 turns it off; 0 to 1000) [2]
@@ -227,14 +227,26 @@ pub fn run(argv: &[String]) -> Result<()> {
         let files = mesh_files(Path::new(dir))?;
         let stems: Vec<String> =
             files.iter().map(|p| sanitize(&p.file_stem().unwrap_or_default().to_string_lossy())).collect();
+        let mut taken: std::collections::HashSet<String> = std::collections::HashSet::new();
         for (path, stem) in files.iter().zip(&stems) {
             // `a.obj` and `a.off` side by side: keep both, named apart by extension.
-            let name = if stems.iter().filter(|s| *s == stem).count() > 1 {
+            let mut name = if stems.iter().filter(|s| *s == stem).count() > 1 {
                 let ext = path.extension().unwrap_or_default().to_string_lossy().to_ascii_lowercase();
                 format!("{stem}_{ext}")
             } else {
                 stem.clone()
             };
+            // Stems that sanitise alike (`x~2.obj` and `x_2.obj` are both `x_2`) would
+            // write one file: later ones, in name order, get a number.
+            if taken.contains(&name) {
+                let base = name.clone();
+                let mut k = 2;
+                while taken.contains(&format!("{base}_{k}")) || stems.contains(&format!("{base}_{k}")) {
+                    k += 1;
+                }
+                name = format!("{base}_{k}");
+            }
+            taken.insert(name.clone());
             jobs.push(Job::File(path.clone(), name));
         }
         // After every plain job, so each of those keeps its index, hence its random

@@ -126,6 +126,12 @@ impl Split {
                         "{cmd}: --hold-out takes sample names separated by commas, got '{v}'"
                     )));
                 }
+                if noise_variant(n).1 > 1 {
+                    return Err(Error::Usage(format!(
+                        "{cmd}: --hold-out {n}: a noise draw goes wherever its sample goes; hold out {} instead",
+                        noise_variant(n).0
+                    )));
+                }
                 names.push(n.to_string());
             }
         }
@@ -152,12 +158,14 @@ impl Split {
     }
 
     /// Whether the sample called `name` is in the validation part. A sample derived from
-    /// a mesh (`NAME@c`, `dataset --coarsen`) goes wherever its mesh's sample `NAME`
-    /// goes: the hash, the fold and `--hold-out` read the part before the `@`, so a
-    /// held-out mesh is never trained on in another form.
+    /// a mesh (`NAME@c`, `dataset --coarsen`; `NAME~2`, `dataset --noise-variants`) goes
+    /// wherever its mesh's sample `NAME` goes: the hash, the fold and `--hold-out` read
+    /// the part before the `@` or `~`, so a held-out mesh is never trained on in another
+    /// form; and a held-out copy (`--hold-out NAME@c`) takes its noise draws with it.
     pub(crate) fn is_validation(&self, name: &str) -> bool {
         let parent = parent_name(name);
-        self.names.iter().any(|n| n == name || n == parent)
+        let drawn_for = noise_variant(name).0;
+        self.names.iter().any(|n| n == name || n == parent || n == drawn_for)
             || is_validation(parent, self.fraction)
             || self.fold.is_some_and(|(i, k)| fold_of(parent, k) == i)
     }
@@ -181,7 +189,7 @@ impl Split {
 
 /// The mesh a sample was made from: the name up to the first `@` (a copy, `NAME@c`) or
 /// `~` (a noise variant, `NAME~2`; sample names of `dataset` never hold either otherwise:
-/// file stems are sanitised to `[A-Za-z0-9._-]`).
+/// file stems are sanitised to letters, digits and `._-`).
 pub(crate) fn parent_name(name: &str) -> &str {
     name.split(['@', VARIANT_SEP]).next().unwrap_or(name)
 }
@@ -218,7 +226,21 @@ pub(crate) fn load_dir(cmd: &str, dir: &Path) -> Result<Vec<Sample>> {
             dir.display()
         )));
     }
-    files.iter().map(|p| load_sample(p)).collect()
+    let samples: Vec<Sample> = files.iter().map(|p| load_sample(p)).collect::<Result<_>>()?;
+    // Splits, hold-outs and noise-draw groups go by the name inside each file: two files
+    // with one name would be one sample to them.
+    let mut seen: std::collections::HashMap<&str, &PathBuf> = std::collections::HashMap::new();
+    for (s, p) in samples.iter().zip(&files) {
+        if let Some(first) = seen.insert(s.name.as_str(), p) {
+            return Err(Error::Usage(format!(
+                "{cmd}: {} and {} hold samples of one name, {:?} (a copied file?); keep one",
+                first.display(),
+                p.display(),
+                s.name
+            )));
+        }
+    }
+    Ok(samples)
 }
 
 /// Parses `--scale MIN,MAX`: two finite numbers with 0 < MIN <= MAX.

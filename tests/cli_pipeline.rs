@@ -1041,6 +1041,44 @@ fn dataset_noise_variants_draw_the_noise_again_and_split_with_their_mesh() {
     assert!(!Path::new(&never).exists());
 }
 
+/// `train --draws first` (session 22): on a `--noise-variants` dataset it trains exactly
+/// as on the dataset written without variants (the same weights, byte for byte), while
+/// the default (`all`) reads another draw in epoch 2. Bad values are usage errors that
+/// write nothing.
+#[test]
+fn train_draws_first_trains_as_the_plain_dataset() {
+    let s = Scratch::new("train_draws");
+    let meshes = s.p("meshes");
+    write_meshes(&meshes);
+    let (plain, var) = (s.p("plain"), s.p("var"));
+    let data = |out: &str, extra: &[&str]| {
+        ok(&[&["dataset", "--meshes", &meshes, "--synthetic", "1", "--out", out, "--seed", "5"][..], extra]
+            .concat());
+    };
+    data(&plain, &[]);
+    data(&var, &["--noise-variants", "2"]);
+    let train = |d: &str, out: &str, extra: &[&str]| {
+        let args =
+            ["train", "--data", d, "--out", out, "--epochs", "2", "--max-candidates", "300", "--seed", "4"];
+        ok(&[&args[..], extra].concat())
+    };
+    let (m_plain, m_first, m_all) = (s.p("plain.p2qm"), s.p("first.p2qm"), s.p("all.p2qm"));
+    train(&plain, &m_plain, &[]);
+    let out = train(&var, &m_first, &["--draws", "first"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    let n = sample_files(&plain).len();
+    assert!(err.contains(&format!("{n} further noise draws (NAME~2, ...) left out")), "{err}");
+    assert!(!err.contains("more noise draws of them"), "{err}");
+    train(&var, &m_all, &[]);
+    let read = |p: &str| std::fs::read(p).unwrap();
+    assert_eq!(read(&m_first), read(&m_plain), "--draws first must train as the plain dataset");
+    assert_ne!(read(&m_all), read(&m_plain), "the default reads the second draws in epoch 2");
+    let never = s.p("never.p2qm");
+    let e = fails(&["train", "--data", &var, "--out", &never, "--draws", "some"], 2);
+    assert!(e.contains("--draws"), "{e}");
+    assert!(!Path::new(&never).exists());
+}
+
 /// Session 21's review: a held-out copy takes its noise draws with it; a noise draw cannot
 /// be held out on its own; two files of one sample name are refused (splits and draw
 /// groups go by that name); mesh files whose names sanitise alike get samples apart.

@@ -59,6 +59,13 @@ OPTIONS:
     --fold I/K            also hold out fold I of K (0 <= I < K <= 16; the folds split
                           the samples by another hash of the name): K such runs give
                           the out-of-fold classifiers `refine --fold-models` reads
+    --draws WHICH         samples of `dataset --noise-variants`: all = one draw of
+                          each sample per epoch, in turn (NAME, NAME~2, ...); first =
+                          each sample's first draw only (NAME), so training is exactly
+                          that of the dataset without variants (`make train`: the
+                          classifier reads first draws, its rounds every draw).
+                          Validation reads first draws either way; give the same
+                          value when resuming [all]
 
 AUGMENTATION (per step, from the training RNG; not stored in checkpoints, so give
 the same options when resuming):
@@ -91,6 +98,7 @@ const SPEC: Spec = Spec {
         "--scale",
         "--jitter",
         "--kp-spacing-cells",
+        "--draws",
     ],
     switches: &["--no-rotate", "--no-augment", "--sign-free-normals"],
 };
@@ -394,9 +402,32 @@ pub fn run(argv: &[String]) -> Result<()> {
         },
     };
 
+    // `--draws first` trains on each sample's first noise draw only, exactly as on the
+    // dataset written without `--noise-variants`; `all` (the default) takes one draw of
+    // each sample per epoch, in turn.
+    let all_draws = match a.value("--draws").unwrap_or("all") {
+        "first" => false,
+        "all" => true,
+        other => {
+            return Err(Error::Usage(format!(
+                "{cmd}: --draws {other:?}: expected first or all (see `point2quad {cmd} --help`)"
+            )))
+        }
+    };
+
     let t0 = std::time::Instant::now();
-    let samples = load_dir(cmd, &data)?;
+    let mut samples = load_dir(cmd, &data)?;
     split.check_names(cmd, samples.iter().map(|s| s.name.as_str()))?;
+    let drawn = samples.len();
+    if !all_draws {
+        samples.retain(|s| noise_variant(&s.name).1 == 1);
+        if samples.len() < drawn {
+            say!(
+                "train: {} further noise draws (NAME~2, ...) left out (--draws first)",
+                drawn - samples.len()
+            );
+        }
+    }
     let (mut tr, mut va): (Vec<Sample>, Vec<Sample>) = (Vec::new(), Vec::new());
     let mut extra_draws = 0;
     for s in samples {

@@ -2,7 +2,7 @@
 //! the classifier's own probabilities over a dataset (the classifier stays frozen).
 
 use crate::args::{Args, Spec};
-use crate::cmd_train::{fold_of, load_dir, parent_name, Split, MAX_FOLDS};
+use crate::cmd_train::{draws_arg, fold_of, load_dir, parent_name, Split, MAX_FOLDS};
 use crate::output::say;
 use point2quad::nn::checkpoint;
 use point2quad::pipeline::dataset::noise_variant;
@@ -168,21 +168,13 @@ pub fn run(argv: &[String]) -> Result<()> {
     };
     let mut model = base.with_refinement_reading(rounds, &widths, sides, input, cfg.seed)?;
 
-    let t0 = std::time::Instant::now();
-    let mut samples = load_dir(cmd, &data)?;
     // By default the rounds train on each sample's first noise draw (`NAME`; `NAME~2`, …
     // of `dataset --noise-variants` are left out), so their time and figures stay those
     // of the dataset without variants; `--draws all` keeps the training part's draws.
-    // Validation reads first draws either way.
-    let all_draws = match a.value("--draws").unwrap_or("first") {
-        "first" => false,
-        "all" => true,
-        other => {
-            return Err(Error::Usage(format!(
-                "{cmd}: --draws {other:?}: expected first or all (see `point2quad {cmd} --help`)"
-            )))
-        }
-    };
+    // Validation reads first draws either way. (Checked before the samples are read.)
+    let all_draws = draws_arg(cmd, &a, false)?;
+    let t0 = std::time::Instant::now();
+    let mut samples = load_dir(cmd, &data)?;
     let drawn = samples.len();
     samples.retain(|s| noise_variant(&s.name).1 == 1 || (all_draws && !split.is_validation(&s.name)));
     if samples.len() < drawn {

@@ -107,6 +107,20 @@ fn fnv(s: &str) -> u64 {
     s.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
 }
 
+/// `--draws first|all` of `train` and `refine` (`dataset --noise-variants`): whether every
+/// noise draw of a sample is read (`all`) or its first only (`first`); `default_all` when
+/// the option is not given.
+pub(crate) fn draws_arg(cmd: &str, a: &Args, default_all: bool) -> Result<bool> {
+    match a.value("--draws") {
+        None => Ok(default_all),
+        Some("first") => Ok(false),
+        Some("all") => Ok(true),
+        Some(other) => Err(Error::Usage(format!(
+            "{cmd}: --draws {other:?}: expected first or all (see `point2quad {cmd} --help`)"
+        ))),
+    }
+}
+
 /// The validation split shared by `train` and `refine`: a sample is held out when a hash
 /// of its name falls under `fraction` (the same split on every run) or when its name is
 /// one of `names` (`--hold-out`: whole meshes kept out of training to judge on).
@@ -405,15 +419,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     // `--draws first` trains on each sample's first noise draw only, exactly as on the
     // dataset written without `--noise-variants`; `all` (the default) takes one draw of
     // each sample per epoch, in turn.
-    let all_draws = match a.value("--draws").unwrap_or("all") {
-        "first" => false,
-        "all" => true,
-        other => {
-            return Err(Error::Usage(format!(
-                "{cmd}: --draws {other:?}: expected first or all (see `point2quad {cmd} --help`)"
-            )))
-        }
-    };
+    let all_draws = draws_arg(cmd, &a, true)?;
 
     let t0 = std::time::Instant::now();
     let mut samples = load_dir(cmd, &data)?;

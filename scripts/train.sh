@@ -9,26 +9,31 @@
 # (beside the hashed validation split), to judge a recipe on meshes it never saw; the
 # shipped weights use none (session 7's experiments used qm_monkey,qm_elephant,qm_feline).
 # Resumes from out/train/model.p2qm.ckpt if a run was interrupted.
-# Then 5 refinement rounds (`point2quad refine`, seed 0, a few minutes) on the same
+# Then 5 refinement rounds (`point2quad refine`, seed 0, about 10 minutes) on the same
 # data over the trained classifier; the refined weights are the shipped ones.
+# Since session 22 the dataset holds three noise draws of each sample
+# (`--noise-variants 3`; the first draws are byte for byte the dataset without them):
+# the classifier trains on first draws only (`train --draws first`), the rounds on
+# every draw (`refine --draws all`), so they learn from the classifier's scores on
+# noise points it was not trained on.
 set -euo pipefail
 BIN=${1:-target/release/point2quad}
 EPOCHS=${EPOCHS:-40}
-DATA=out/train/data; MODEL=out/train/model.p2qm; REFINED=out/train/refined.p2qm
+DATA=out/train/data_nv3; MODEL=out/train/model.p2qm; REFINED=out/train/refined.p2qm
 mkdir -p out/train
 if [ ! -f "$DATA/index.txt" ]; then
   MESHES=()
   if [ -d ../shared/data/quads/train ]; then MESHES=(--meshes ../shared/data/quads/train --coarsen 0.5);
   else echo "train: ../shared/data/quads/train not found: synthetic data only"; fi
   rm -rf "$DATA"
-  "$BIN" dataset --out "$DATA" --synthetic 80 "${MESHES[@]}" --noise 0.1 --seed 7
+  "$BIN" dataset --out "$DATA" --synthetic 80 "${MESHES[@]}" --noise 0.1 --seed 7 --noise-variants 3
 fi
 HOLD=()
 [ -n "${HOLD_OUT:-}" ] && HOLD=(--hold-out "$HOLD_OUT")
 # A fresh run chooses the config; a resumed one reads it from its checkpoint.
 START=(--config default --sign-free-normals)
 [ -f "$MODEL.ckpt" ] && START=(--resume "$MODEL.ckpt")
-"$BIN" train --data "$DATA" --out "$MODEL" --epochs "$EPOCHS" --seed 0 "${HOLD[@]}" "${START[@]}"
-"$BIN" refine --data "$DATA" --model "$MODEL" --out "$REFINED" --rounds 5 --seed 0 "${HOLD[@]}"
+"$BIN" train --data "$DATA" --out "$MODEL" --epochs "$EPOCHS" --seed 0 --draws first "${HOLD[@]}" "${START[@]}"
+"$BIN" refine --data "$DATA" --model "$MODEL" --out "$REFINED" --rounds 5 --seed 0 --draws all "${HOLD[@]}"
 cp "$REFINED" fixtures/point2quad-default.p2qm
 echo "train: weights copied to fixtures/point2quad-default.p2qm"

@@ -7,7 +7,8 @@
 # preset reading the point normals without their signs (--sign-free-normals, session 8),
 # seed 0. HOLD_OUT=a,b,c holds those samples out of training and refinement too
 # (beside the hashed validation split), to judge a recipe on meshes it never saw; the
-# shipped weights use none (session 7's experiments used qm_monkey,qm_elephant,qm_feline).
+# shipped weights use none (session 7's experiments used qm_monkey,qm_elephant,qm_feline);
+# such a run writes out/train/{model,refined}_holdout_<names>.p2qm and leaves fixtures/ alone.
 # Resumes from out/train/model.p2qm.ckpt if a run was interrupted.
 # Then 5 refinement rounds (`point2quad refine`, seed 0, about 10 minutes) on the same
 # data over the trained classifier; the refined weights are the shipped ones.
@@ -29,11 +30,21 @@ if [ ! -f "$DATA/index.txt" ]; then
   "$BIN" dataset --out "$DATA" --synthetic 80 "${MESHES[@]}" --noise 0.1 --seed 7 --noise-variants 3
 fi
 HOLD=()
-[ -n "${HOLD_OUT:-}" ] && HOLD=(--hold-out "$HOLD_OUT")
+if [ -n "${HOLD_OUT:-}" ]; then
+  # A held-out run keeps its own weights and checkpoint (a shipped run's checkpoint would
+  # otherwise be resumed, or this one's resumed by it) and never replaces the fixture.
+  HOLD=(--hold-out "$HOLD_OUT")
+  tag=$(printf '%s' "$HOLD_OUT" | tr -c 'A-Za-z0-9_.-' '_')
+  MODEL=out/train/model_holdout_$tag.p2qm; REFINED=out/train/refined_holdout_$tag.p2qm
+fi
 # A fresh run chooses the config; a resumed one reads it from its checkpoint.
 START=(--config default --sign-free-normals)
 [ -f "$MODEL.ckpt" ] && START=(--resume "$MODEL.ckpt")
 "$BIN" train --data "$DATA" --out "$MODEL" --epochs "$EPOCHS" --seed 0 --draws first "${HOLD[@]}" "${START[@]}"
 "$BIN" refine --data "$DATA" --model "$MODEL" --out "$REFINED" --rounds 5 --seed 0 --draws all "${HOLD[@]}"
-cp "$REFINED" fixtures/point2quad-default.p2qm
-echo "train: weights copied to fixtures/point2quad-default.p2qm"
+if [ ${#HOLD[@]} -gt 0 ]; then
+  echo "train: held-out weights in $REFINED (the fixture is left as it is)"
+else
+  cp "$REFINED" fixtures/point2quad-default.p2qm
+  echo "train: weights copied to fixtures/point2quad-default.p2qm"
+fi

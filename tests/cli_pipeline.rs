@@ -1076,6 +1076,12 @@ fn train_draws_first_trains_as_the_plain_dataset() {
     let never = s.p("never.p2qm");
     let e = fails(&["train", "--data", &var, "--out", &never, "--draws", "some"], 2);
     assert!(e.contains("--draws"), "{e}");
+    // Checked before anything is read: a missing checkpoint or model is not reached.
+    let missing = s.p("missing.p2qm");
+    let e = fails(&["train", "--data", &var, "--out", &never, "--resume", &missing, "--draws", "x"], 2);
+    assert!(e.contains("--draws"), "{e}");
+    let e = fails(&["refine", "--data", &var, "--model", &missing, "--out", &never, "--draws", "x"], 2);
+    assert!(e.contains("--draws"), "{e}");
     assert!(!Path::new(&never).exists());
 }
 

@@ -61,8 +61,10 @@ OPTIONS:
                       besides sample NAME, samples NAME~2 ... NAME~N of the same
                       mesh with other noise points, hence other candidates. `train`
                       trains on one of the N draws of each per epoch, in turn (at the
-                      cost of one); its validation, and `refine` unless `--draws
-                      all`, read NAME only. N times the files, time and memory
+                      cost of one), or on NAME only with `--draws first`; `refine`
+                      reads NAME only unless `--draws all`; validation reads NAME
+                      only. `make train` uses 3 (the classifier on first draws, the
+                      rounds on all). N times the files, time and memory
     --seed S          random seed (default 0); the same seed gives the same files
     --continue-rank R lattice continuation in the candidates, as `reconstruct
                       --continue-rank` (0 turns it off; 0 to 1000) [2]

@@ -63,8 +63,9 @@ OPTIONS:
     --draws WHICH         samples of `dataset --noise-variants`: first = each sample's
                           first noise draw only (NAME; NAME~2 ... left out); all = every
                           draw, so the rounds also learn from BASE's scores on noise
-                          points it was not trained on (session 21's experiment).
-                          Validation reads first draws either way [first]
+                          points it was not trained on (the shipped rounds, since
+                          session 22). Validation reads first draws either way.
+                          (`train --draws` defaults to all, this one to first) [first]
 ";
 
 const SPEC: Spec = Spec {
@@ -135,6 +136,11 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     cfg.seed = a.parsed(cmd, "--seed", 0u64)?;
     let split = Split::from_args(cmd, &a)?;
+    // By default the rounds train on each sample's first noise draw (`NAME`; `NAME~2`, …
+    // of `dataset --noise-variants` are left out), so their time and figures stay those
+    // of the dataset without variants; `--draws all` keeps the training part's draws.
+    // Validation reads first draws either way.
+    let all_draws = draws_arg(cmd, &a, false)?;
     crate::output::check_output_path(&out)?;
     crate::output::check_not_in_dataset(cmd, &out, &data)?;
     crate::output::check_not_input(cmd, &out, &base_path)?;
@@ -168,15 +174,11 @@ pub fn run(argv: &[String]) -> Result<()> {
     };
     let mut model = base.with_refinement_reading(rounds, &widths, sides, input, cfg.seed)?;
 
-    // By default the rounds train on each sample's first noise draw (`NAME`; `NAME~2`, …
-    // of `dataset --noise-variants` are left out), so their time and figures stay those
-    // of the dataset without variants; `--draws all` keeps the training part's draws.
-    // Validation reads first draws either way. (Checked before the samples are read.)
-    let all_draws = draws_arg(cmd, &a, false)?;
     let t0 = std::time::Instant::now();
-    let mut samples = load_dir(cmd, &data)?;
-    let drawn = samples.len();
-    samples.retain(|s| noise_variant(&s.name).1 == 1 || (all_draws && !split.is_validation(&s.name)));
+    let (samples, names) = load_dir(cmd, &data, |s| {
+        noise_variant(&s.name).1 == 1 || (all_draws && !split.is_validation(&s.name))
+    })?;
+    let drawn = names.len();
     if samples.len() < drawn {
         let why = if all_draws {
             "validation reads each sample's first"

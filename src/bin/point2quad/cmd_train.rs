@@ -65,7 +65,8 @@ OPTIONS:
                           that of the dataset without variants (`make train`: the
                           classifier reads first draws, its rounds every draw).
                           Validation reads first draws either way; give the same
-                          value when resuming [all]
+                          value when resuming. (`refine --draws` defaults to first,
+                          this one to all) [all]
 
 AUGMENTATION (per step, from the training RNG; not stored in checkpoints, so give
 the same options when resuming):
@@ -232,7 +233,11 @@ pub(crate) fn fold_of(name: &str, k: usize) -> usize {
 }
 
 /// Every `.p2qs` sample of `dir`, by file name; `cmd` names the subcommand in the error.
-pub(crate) fn load_dir(cmd: &str, dir: &Path) -> Result<Vec<Sample>> {
+pub(crate) fn load_dir(
+    cmd: &str,
+    dir: &Path,
+    keep: impl Fn(&Sample) -> bool,
+) -> Result<(Vec<Sample>, Vec<String>)> {
     let rd = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
     let mut files: Vec<PathBuf> = Vec::new();
     for e in rd {
@@ -248,12 +253,16 @@ pub(crate) fn load_dir(cmd: &str, dir: &Path) -> Result<Vec<Sample>> {
             dir.display()
         )));
     }
-    let samples: Vec<Sample> = files.iter().map(|p| load_sample(p)).collect::<Result<_>>()?;
+    // Each sample is read, judged by `keep` and dropped at once if it is not kept, so the
+    // samples left out (other noise draws) never take memory together.
+    let mut samples = Vec::new();
+    let mut names = Vec::with_capacity(files.len());
     // Splits, hold-outs and noise-draw groups go by the name inside each file: two files
     // with one name would be one sample to them.
-    let mut seen: std::collections::HashMap<&str, &PathBuf> = std::collections::HashMap::new();
-    for (s, p) in samples.iter().zip(&files) {
-        if let Some(first) = seen.insert(s.name.as_str(), p) {
+    let mut seen: std::collections::HashMap<String, &PathBuf> = std::collections::HashMap::new();
+    for p in &files {
+        let s = load_sample(p)?;
+        if let Some(first) = seen.insert(s.name.clone(), p) {
             return Err(Error::Usage(format!(
                 "{cmd}: {} and {} hold samples of one name, {:?} (a copied file?); keep one",
                 first.display(),
@@ -261,8 +270,12 @@ pub(crate) fn load_dir(cmd: &str, dir: &Path) -> Result<Vec<Sample>> {
                 s.name
             )));
         }
+        names.push(s.name.clone());
+        if keep(&s) {
+            samples.push(s);
+        }
     }
-    Ok(samples)
+    Ok((samples, names))
 }
 
 /// Parses `--scale MIN,MAX`: two finite numbers with 0 < MIN <= MAX.
@@ -322,6 +335,10 @@ pub fn run(argv: &[String]) -> Result<()> {
     cfg.max_candidates = a.parsed(cmd, "--max-candidates", cfg.max_candidates)?;
     // One message per option, naming it and the value given.
     let split = Split::from_args(cmd, &a)?.with_fold_arg(cmd, &a)?;
+    // `--draws first` trains on each sample's first noise draw only, exactly as on the
+    // dataset written without `--noise-variants`; `all` (the default) takes one draw of
+    // each sample per epoch, in turn.
+    let all_draws = draws_arg(cmd, &a, true)?;
     // Batch norm in train mode needs two rows: one candidate per step fails mid-epoch.
     if cfg.max_candidates < 2 {
         return Err(Error::Usage(format!(
@@ -416,23 +433,14 @@ pub fn run(argv: &[String]) -> Result<()> {
         },
     };
 
-    // `--draws first` trains on each sample's first noise draw only, exactly as on the
-    // dataset written without `--noise-variants`; `all` (the default) takes one draw of
-    // each sample per epoch, in turn.
-    let all_draws = draws_arg(cmd, &a, true)?;
-
     let t0 = std::time::Instant::now();
-    let mut samples = load_dir(cmd, &data)?;
-    split.check_names(cmd, samples.iter().map(|s| s.name.as_str()))?;
-    let drawn = samples.len();
-    if !all_draws {
-        samples.retain(|s| noise_variant(&s.name).1 == 1);
-        if samples.len() < drawn {
-            say!(
-                "train: {} further noise draws (NAME~2, ...) left out (--draws first)",
-                drawn - samples.len()
-            );
-        }
+    let (samples, names) = load_dir(cmd, &data, |s| all_draws || noise_variant(&s.name).1 == 1)?;
+    split.check_names(cmd, names.iter().map(String::as_str))?;
+    if samples.len() < names.len() {
+        say!(
+            "train: {} further noise draws (NAME~2, ...) left out (--draws first)",
+            names.len() - samples.len()
+        );
     }
     let (mut tr, mut va): (Vec<Sample>, Vec<Sample>) = (Vec::new(), Vec::new());
     let mut extra_draws = 0;

@@ -214,6 +214,28 @@ fn reconstruct_rejects_bad_model_files_and_writes_nothing() {
     ]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("epoch 2/2") && !err.contains("epoch 1/2"), "{err}");
+    assert!(!err.contains("note: --lr"), "{err}");
+    // A rate given with --resume is taken, with a note that the run no longer continues
+    // exactly (the checkpoint does not store it).
+    let out = ok(&[
+        "train",
+        "--data",
+        &s.p("data"),
+        "--out",
+        &s.p("m3.p2qm"),
+        "--epochs",
+        "2",
+        "--val-fraction",
+        "0",
+        "--max-candidates",
+        "300",
+        "--lr",
+        "0.003",
+        "--resume",
+        &format!("{model}.ckpt"),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("note: --lr 0.003 with --resume"), "{err}");
 }
 
 #[test]

@@ -391,6 +391,13 @@ pub fn run(argv: &[String]) -> Result<()> {
 
     let (mut model, resume) = match a.value("--resume") {
         Some(r) => {
+            // The checkpoint holds the epoch, not the options: a rate given now sets the
+            // whole schedule, so say that the run continues exactly only with its own.
+            if let Some(lr) = a.value("--lr") {
+                say!(
+                    "train: note: --lr {lr} with --resume: the checkpoint does not store the rate, so the schedule from epoch 1 is recomputed with {lr}; the run continues exactly only with the --lr it started with"
+                );
+            }
             let ck = checkpoint::load(Path::new(r))?;
             let state = ck.train.clone().ok_or_else(|| Error::Checkpoint {
                 path: r.into(),

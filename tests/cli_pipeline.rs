@@ -1019,6 +1019,13 @@ fn dataset_noise_variants_draw_the_noise_again_and_split_with_their_mesh() {
     let want = format!("{} training (and {} more noise draws of them", pf.len() - 1, 2 * (pf.len() - 1));
     assert!(err.contains(&want), "want {want:?} in {err}");
     assert!(err.contains(" / 1 validation samples"), "{err}");
+    // The candidates are counted per draw: an epoch reads the first draws' count or so.
+    let count = |part: &str| -> usize {
+        let at = err.find(part).unwrap_or_else(|| panic!("{part:?} not in {err}"));
+        err[..at].rsplit(|c: char| !c.is_ascii_digit()).next().unwrap().parse().unwrap()
+    };
+    let (first, all) = (count(" training candidates in first draws"), count(" in all)"));
+    assert!(first > 0 && all > first, "{first} / {all}: {err}");
     let out = ok(&[
         "refine",
         "--data",

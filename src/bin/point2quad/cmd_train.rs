@@ -466,14 +466,23 @@ pub fn run(argv: &[String]) -> Result<()> {
     if tr.is_empty() {
         return Err(Error::Usage("train: every sample fell into validation; lower --val-fraction".into()));
     }
-    let cands: usize = tr.iter().map(|s| s.labels.len()).sum();
+    // With noise draws an epoch reads one draw of each sample: count the first draws'
+    // candidates, and every draw's beside them.
+    let first_cands: usize =
+        tr.iter().filter(|s| noise_variant(&s.name).1 == 1).map(|s| s.labels.len()).sum();
+    let all_cands: usize = tr.iter().map(|s| s.labels.len()).sum();
+    let cands = if extra_draws > 0 {
+        format!("{first_cands} training candidates in first draws, {all_cands} in all")
+    } else {
+        format!("{all_cands} training candidates")
+    };
     let draws = if extra_draws > 0 {
         format!(" (and {extra_draws} more noise draws of them: one draw of each per epoch)")
     } else {
         String::new()
     };
     say!(
-        "train: {} training{draws} / {} validation samples ({cands} training candidates) loaded in {:.1}s; model '{}' with {} parameters",
+        "train: {} training{draws} / {} validation samples ({cands}) loaded in {:.1}s; model '{}' with {} parameters",
         tr.len() - extra_draws,
         va.len(),
         t0.elapsed().as_secs_f64(),

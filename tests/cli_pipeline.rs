@@ -197,44 +197,18 @@ fn reconstruct_rejects_bad_model_files_and_writes_nothing() {
     assert!(err.contains(".ckpt") && err.contains("m.p2qm"), "{err}");
     assert!(!Path::new(&s.p("m2.p2qm")).exists());
     // Resuming from the checkpoint works and continues at epoch 2.
-    let out = ok(&[
-        "train",
-        "--data",
-        &s.p("data"),
-        "--out",
-        &s.p("m2.p2qm"),
-        "--epochs",
-        "2",
-        "--val-fraction",
-        "0",
-        "--max-candidates",
-        "300",
-        "--resume",
-        &format!("{model}.ckpt"),
-    ]);
-    let err = String::from_utf8_lossy(&out.stderr);
+    let (data, ckpt) = (s.p("data"), format!("{model}.ckpt"));
+    let resume = |out: &str, extra: &[&str]| {
+        let args = ["train", "--data", &data, "--out", out, "--epochs", "2", "--val-fraction", "0"];
+        let out = ok(&[&args[..], &["--max-candidates", "300", "--resume", &ckpt], extra].concat());
+        String::from_utf8_lossy(&out.stderr).to_string()
+    };
+    let err = resume(&s.p("m2.p2qm"), &[]);
     assert!(err.contains("epoch 2/2") && !err.contains("epoch 1/2"), "{err}");
     assert!(!err.contains("note: --lr"), "{err}");
     // A rate given with --resume is taken, with a note that the run no longer continues
     // exactly (the checkpoint does not store it).
-    let out = ok(&[
-        "train",
-        "--data",
-        &s.p("data"),
-        "--out",
-        &s.p("m3.p2qm"),
-        "--epochs",
-        "2",
-        "--val-fraction",
-        "0",
-        "--max-candidates",
-        "300",
-        "--lr",
-        "0.003",
-        "--resume",
-        &format!("{model}.ckpt"),
-    ]);
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = resume(&s.p("m3.p2qm"), &["--lr", "0.003"]);
     assert!(err.contains("note: --lr 0.003 with --resume"), "{err}");
 }
 

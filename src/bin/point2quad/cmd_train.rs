@@ -232,7 +232,8 @@ pub(crate) fn fold_of(name: &str, k: usize) -> usize {
     ((fnv(name) >> 32) % k as u64) as usize
 }
 
-/// Every `.p2qs` sample of `dir`, by file name; `cmd` names the subcommand in the error.
+/// The `.p2qs` samples of `dir` that `keep` accepts, by file name, and the names of all
+/// samples read (kept or not, in no order); `cmd` names the subcommand in the error.
 pub(crate) fn load_dir(
     cmd: &str,
     dir: &Path,
@@ -256,7 +257,6 @@ pub(crate) fn load_dir(
     // Each sample is read, judged by `keep` and dropped at once if it is not kept, so the
     // samples left out (other noise draws) never take memory together.
     let mut samples = Vec::new();
-    let mut names = Vec::with_capacity(files.len());
     // Splits, hold-outs and noise-draw groups go by the name inside each file: two files
     // with one name would be one sample to them.
     let mut seen: std::collections::HashMap<String, &PathBuf> = std::collections::HashMap::new();
@@ -270,12 +270,11 @@ pub(crate) fn load_dir(
                 s.name
             )));
         }
-        names.push(s.name.clone());
         if keep(&s) {
             samples.push(s);
         }
     }
-    Ok((samples, names))
+    Ok((samples, seen.into_keys().collect()))
 }
 
 /// Parses `--scale MIN,MAX`: two finite numbers with 0 < MIN <= MAX.
@@ -391,6 +390,7 @@ pub fn run(argv: &[String]) -> Result<()> {
 
     let (mut model, resume) = match a.value("--resume") {
         Some(r) => {
+            let ck = checkpoint::load(Path::new(r))?;
             // The checkpoint holds the epoch, not the options: a rate given now sets the
             // whole schedule, so say that the run continues exactly only with its own.
             if let Some(lr) = a.value("--lr") {
@@ -398,7 +398,6 @@ pub fn run(argv: &[String]) -> Result<()> {
                     "train: note: --lr {lr} with --resume: the checkpoint does not store the rate, so the schedule from epoch 1 is recomputed with {lr}; the run continues exactly only with the --lr it started with"
                 );
             }
-            let ck = checkpoint::load(Path::new(r))?;
             let state = ck.train.clone().ok_or_else(|| Error::Checkpoint {
                 path: r.into(),
                 msg: "holds weights only, no training state (resume from the .ckpt file)".into(),

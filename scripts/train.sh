@@ -9,7 +9,8 @@
 # (beside the hashed validation split), to judge a recipe on meshes it never saw; the
 # shipped weights use none (session 7's experiments used qm_monkey,qm_elephant,qm_feline);
 # such a run writes out/train/{model,refined}_holdout_<names>.p2qm and leaves fixtures/ alone.
-# Resumes from out/train/model.p2qm.ckpt if a run was interrupted.
+# Resumes from out/train/model.p2qm.ckpt if a run was interrupted (the checkpoint records
+# the run's options and data: one of other data is refused; delete it to start afresh).
 # Then 5 refinement rounds (`point2quad refine`, seed 0, about 10 minutes) on the same
 # data over the trained classifier; the refined weights are the shipped ones.
 # Since session 22 the dataset holds three noise draws of each sample

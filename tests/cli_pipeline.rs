@@ -1088,6 +1088,106 @@ fn train_draws_first_trains_as_the_plain_dataset() {
     assert!(!Path::new(&never).exists());
 }
 
+/// Session 23: a checkpoint records its run's options and a fingerprint of its data.
+/// Resumed with none of the options, a run ends byte for byte where the uninterrupted
+/// run does; an option given with another value is refused, naming it and the recorded
+/// value (`--lr` is taken, with a note); other data is refused; a checkpoint without a
+/// record (an older build's) resumes with a note.
+#[test]
+fn resume_reads_the_run_from_the_checkpoint() {
+    use point2quad::nn::checkpoint;
+    let s = Scratch::new("resume_record");
+    let meshes = s.p("meshes");
+    write_meshes(&meshes);
+    let (data, other) = (s.p("data"), s.p("other"));
+    ok(&["dataset", "--meshes", &meshes, "--synthetic", "1", "--out", &data, "--seed", "5"]);
+    ok(&["dataset", "--meshes", &meshes, "--synthetic", "1", "--out", &other, "--seed", "6"]);
+    let opts = [
+        "--max-candidates",
+        "300",
+        "--seed",
+        "3",
+        "--lr",
+        "0.02",
+        "--val-fraction",
+        "0.3",
+        "--hold-out",
+        "a_sphere",
+        "--jitter",
+        "0.02",
+        "--scale",
+        "0.8,1.2",
+        "--no-rotate",
+    ];
+    let train = |out: &str, epochs: &str, extra: &[&str]| {
+        ok(&[&["train", "--data", &data, "--out", out, "--epochs", epochs][..], extra].concat())
+    };
+    let (straight, part) = (s.p("straight.p2qm"), s.p("part.p2qm"));
+    train(&straight, "2", &opts);
+    train(&part, "1", &opts);
+    let ckpt = format!("{part}.ckpt");
+    let read = |p: &str| std::fs::read(p).unwrap();
+    let saved = read(&ckpt);
+    // Every option from the record: the same weights as the run that was not stopped.
+    let out = train(&part, "2", &["--resume", &ckpt]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("note"), "{err}");
+    assert_eq!(read(&part), read(&straight), "a resume without the options must continue exactly");
+    // The record is in the checkpoint, and the resumed run writes it again.
+    let run = checkpoint::load(Path::new(&ckpt)).unwrap().train.unwrap().run;
+    let get = |k: &str| run.iter().find(|(key, _)| key == k).map(|(_, v)| v.as_str());
+    assert_eq!(
+        (get("seed"), get("lr"), get("hold-out"), get("scale"), get("rotate"), get("draws")),
+        (Some("3"), Some("0.02"), Some("a_sphere"), Some("0.8,1.2"), Some("no"), Some("all"))
+    );
+    assert!(get("data").is_some_and(|d| d.contains("samples")), "{run:?}");
+    // The same options given again are no conflict; another value is refused, before
+    // anything is written.
+    std::fs::write(&ckpt, &saved).unwrap();
+    let again = s.p("again.p2qm");
+    train(&again, "2", &[&opts[..], &["--resume", &ckpt]].concat());
+    assert_eq!(read(&again), read(&straight));
+    let never = s.p("never.p2qm");
+    let resume = |extra: &[&str], code| {
+        fails(
+            &[&["train", "--data", &data, "--out", &never, "--epochs", "2", "--resume", &ckpt][..], extra]
+                .concat(),
+            code,
+        )
+    };
+    for (extra, names) in [
+        (vec!["--seed", "4"], ["--seed", "seed \"3\""]),
+        (vec!["--hold-out", "b_torus"], ["--hold-out", "\"a_sphere\""]),
+        (vec!["--val-fraction", "0.1"], ["--val-fraction", "\"0.3\""]),
+        (vec!["--max-candidates", "200"], ["--max-candidates", "\"300\""]),
+        (vec!["--draws", "first"], ["--draws", "\"all\""]),
+        (vec!["--no-augment"], ["--no-augment", "scale"]),
+        (vec!["--jitter", "0.01"], ["--jitter", "\"0.02\""]),
+    ] {
+        let e = resume(&extra, 2);
+        assert!(names.iter().all(|n| e.contains(n)), "{extra:?}: {e}");
+    }
+    // Another dataset is refused.
+    let e = fails(&["train", "--data", &other, "--out", &never, "--epochs", "2", "--resume", &ckpt], 2);
+    assert!(e.contains("not those the run was trained on") && e.contains("other"), "{e}");
+    assert!(!Path::new(&never).exists() && !Path::new(&format!("{never}.ckpt")).exists());
+    // A new rate is taken, with a note naming the recorded one.
+    let out = train(&s.p("lr.p2qm"), "2", &["--resume", &ckpt, "--lr", "0.005"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("note: --lr 0.005 with --resume") && err.contains("used --lr 0.02"), "{err}");
+    assert_ne!(read(&s.p("lr.p2qm")), read(&straight));
+    // A checkpoint without a record (as older builds wrote them) resumes, with a note,
+    // from the options given.
+    let mut old = checkpoint::load(Path::new(&ckpt)).unwrap();
+    old.train.as_mut().unwrap().run.clear();
+    let old_ckpt = s.p("old.ckpt");
+    checkpoint::save(Path::new(&old_ckpt), &old).unwrap();
+    let out = train(&s.p("old.p2qm"), "2", &[&opts[..], &["--resume", &old_ckpt]].concat());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("holds no record of its run's options"), "{err}");
+    assert_eq!(read(&s.p("old.p2qm")), read(&straight));
+}
+
 /// Session 21's review: a held-out copy takes its noise draws with it; a noise draw cannot
 /// be held out on its own; two files of one sample name are refused (splits and draw
 /// groups go by that name); mesh files whose names sanitise alike get samples apart.

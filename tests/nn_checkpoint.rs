@@ -32,6 +32,17 @@ fn sample(seed: u64) -> Checkpoint {
         step: 12345,
         rng: rng.state(),
         momentum: vec![("a.weight".into(), uniform(&[3, 4], -1.0, 1.0, &mut rng))],
+        // A run record (flag 2) on odd seeds, none (flag 1) on even ones; an empty value
+        // and a non-ASCII one among them.
+        run: if seed % 2 == 1 {
+            vec![
+                ("seed".into(), seed.to_string()),
+                ("hold-out".into(), String::new()),
+                ("é".into(), "x,y".into()),
+            ]
+        } else {
+            Vec::new()
+        },
     };
     Checkpoint::from_store(&s, b"preset=default;width=64", Some(train))
 }
@@ -101,6 +112,40 @@ fn wrong_magic_version_and_inner_lengths_give_clear_errors() {
     b[32 + clen..40 + clen].copy_from_slice(&u64::MAX.to_le_bytes());
     assert!(is_ckpt_err(Checkpoint::from_bytes(&reseal(b), Path::new("n"))));
     assert_eq!(&bytes[..8], &MAGIC);
+}
+
+/// The run record: a state without one is written with flag 1, in the layout from before
+/// the record existed; with one, the same bytes with flag 2 and the record appended.
+/// A flag beyond 2, an absurd record count and a key that is not UTF-8 are errors.
+#[test]
+fn run_record_is_appended_under_flag_two() {
+    let mut without = sample(2);
+    without.train.as_mut().unwrap().run.clear();
+    let mut with = without.clone();
+    with.train.as_mut().unwrap().run = vec![("k".into(), "vw".into())];
+    let (a, b) = (without.to_bytes(), with.to_bytes());
+    let n = a.len() - 8;
+    let tail: Vec<u8> =
+        [&1u64.to_le_bytes()[..], &1u32.to_le_bytes(), b"k", &2u32.to_le_bytes(), b"vw"].concat();
+    assert_eq!(b.len(), a.len() + tail.len());
+    let differ: Vec<usize> = (24..n).filter(|&i| a[i] != b[i]).collect();
+    assert_eq!(differ.len(), 1, "one byte (the flag) differs, not {differ:?}");
+    let flag = differ[0];
+    assert_eq!((a[flag], b[flag]), (1, 2));
+    assert_eq!(&b[n..n + tail.len()], &tail[..]);
+    assert_eq!(Checkpoint::from_bytes(&b, Path::new("r")).unwrap(), with);
+    let mut c = a.clone();
+    c[flag] = 3;
+    let e = Checkpoint::from_bytes(&reseal(c), Path::new("f3")).unwrap_err().to_string();
+    assert!(e.contains("training-state flag 3") && e.contains("f3"), "{e}");
+    let mut c = b.clone();
+    c[n..n + 8].copy_from_slice(&u64::MAX.to_le_bytes());
+    let e = Checkpoint::from_bytes(&reseal(c), Path::new("cnt")).unwrap_err().to_string();
+    assert!(e.contains("run record count"), "{e}");
+    let mut c = b.clone();
+    c[n + 12] = 0xff;
+    let e = Checkpoint::from_bytes(&reseal(c), Path::new("utf")).unwrap_err().to_string();
+    assert!(e.contains("not UTF-8"), "{e}");
 }
 
 proptest! {
@@ -201,8 +246,13 @@ fn training_resumes_bit_identically() {
     let mut sgd1 = Sgd::new(cfg).unwrap();
     let mut rng1 = Rng::new(1);
     train(&mut first, &mut sgd1, &mut rng1, 4);
-    let state =
-        TrainState { epoch: 4, step: sgd1.steps(), rng: rng1.state(), momentum: sgd1.buffers(&first.params) };
+    let state = TrainState {
+        epoch: 4,
+        step: sgd1.steps(),
+        rng: rng1.state(),
+        momentum: sgd1.buffers(&first.params),
+        run: Vec::new(),
+    };
     let bytes = Checkpoint::from_store(&first.params, b"cfg", Some(state)).to_bytes();
     drop(first);
 

@@ -232,6 +232,8 @@ fn small_checkpoint(seed: u64) -> Checkpoint {
         step: 17,
         rng: [1, 2, 3, 4],
         momentum: vec![("a.w".to_string(), t(&[2, 3], &mut rng))],
+        // Seed 2 also stores a run record (flag 2).
+        run: if seed == 2 { vec![("lr".to_string(), "0.01".to_string())] } else { Vec::new() },
     });
     Checkpoint { config: b"cfg".to_vec(), tensors, train }
 }

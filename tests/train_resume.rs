@@ -67,6 +67,7 @@ fn bad_training_inputs_are_errors() {
         step: 0,
         rng: [1, 2, 3, 4],
         momentum: vec![("nope".into(), Tensor::new(&[2], vec![0.0; 2]).unwrap())],
+        run: Vec::new(),
     };
     assert!(train(&mut model, &data, &[], &cfg(1), Some(bad), &mut no_progress, &mut ok).is_err());
 }

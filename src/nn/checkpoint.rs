@@ -6,10 +6,16 @@
 //! magic "P2QCKPT\0" (8) | version u32 | reserved u32 | total_len u64 (whole file)
 //! config_len u64 | config bytes
 //! n_tensors u64 | n × tensor
-//! has_train u8 | [ epoch u64 | step u64 | rng 4×u64 | n_momentum u64 | n × tensor ]
+//! has_train u8 | [ epoch u64 | step u64 | rng 4×u64 | n_momentum u64 | n × tensor
+//!                  | (has_train = 2 only) n_run u64 | n × (text key | text value) ]
 //! checksum u64 = FNV-1a 64 of every preceding byte
 //! tensor = name_len u32 | name (UTF-8) | rank u8 | rank × dim u64 | numel × f32
+//! text = len u32 | UTF-8 bytes
 //! ```
+//! `has_train` is 0 (weights only), 1 (training state) or 2 (training state and the
+//! run's record: what the training command needs to continue the same run). A state
+//! with an empty record is written with flag 1, byte for byte as before the record
+//! existed; a build older than the record refuses flag 2 with a message.
 //! Loading checks, in order, the length, magic, version, declared length, checksum,
 //! then parses with a bounds check before every read; any failure is an
 //! `Error::Checkpoint` naming the file — never a panic. `save` writes atomically
@@ -36,6 +42,11 @@ pub struct TrainState {
     pub rng: [u64; 4],
     /// Momentum buffers by parameter name (`Sgd::buffers`).
     pub momentum: Vec<(String, Tensor)>,
+    /// The run's record, as (key, value) text pairs in the order written: whatever the
+    /// caller needs to continue the same run (the `train` command stores its options and
+    /// a fingerprint of its data). Empty when none was stored; the library's `train`
+    /// leaves it empty.
+    pub run: Vec<(String, String)>,
 }
 
 /// Everything a checkpoint file holds.
@@ -57,6 +68,11 @@ pub fn fnv1a64(bytes: &[u8]) -> u64 {
         h = h.wrapping_mul(0x0000_0100_0000_01b3);
     }
     h
+}
+
+fn put_text(out: &mut Vec<u8>, s: &str) {
+    out.extend_from_slice(&(s.len() as u32).to_le_bytes());
+    out.extend_from_slice(s.as_bytes());
 }
 
 fn put_tensor(out: &mut Vec<u8>, name: &str, t: &Tensor) {
@@ -112,6 +128,11 @@ impl<'a> Reader<'a> {
             return Err(self.err(format!("{what} = {n} cannot fit in the {left} bytes left")));
         }
         Ok(n as usize)
+    }
+    fn text(&mut self, what: &str) -> Result<String> {
+        let len = self.u32(what)? as usize;
+        let bytes = self.take(len, what)?;
+        std::str::from_utf8(bytes).map(str::to_string).map_err(|_| self.err(format!("{what} is not UTF-8")))
     }
     fn tensor(&mut self) -> Result<(String, Tensor)> {
         let len = self.u32("name length")? as usize;
@@ -178,7 +199,7 @@ impl Checkpoint {
         match &self.train {
             None => out.push(0),
             Some(s) => {
-                out.push(1);
+                out.push(if s.run.is_empty() { 1 } else { 2 });
                 out.extend_from_slice(&s.epoch.to_le_bytes());
                 out.extend_from_slice(&s.step.to_le_bytes());
                 for w in s.rng {
@@ -187,6 +208,13 @@ impl Checkpoint {
                 out.extend_from_slice(&(s.momentum.len() as u64).to_le_bytes());
                 for (n, t) in &s.momentum {
                     put_tensor(&mut out, n, t);
+                }
+                if !s.run.is_empty() {
+                    out.extend_from_slice(&(s.run.len() as u64).to_le_bytes());
+                    for (k, v) in &s.run {
+                        put_text(&mut out, k);
+                        put_text(&mut out, v);
+                    }
                 }
             }
         }
@@ -237,7 +265,7 @@ impl Checkpoint {
         }
         let train = match r.u8("training-state flag")? {
             0 => None,
-            1 => {
+            flag @ (1 | 2) => {
                 let epoch = r.u64("epoch")?;
                 let step = r.u64("step")?;
                 let mut rng = [0u64; 4];
@@ -249,7 +277,17 @@ impl Checkpoint {
                 for _ in 0..n {
                     momentum.push(r.tensor()?);
                 }
-                Some(TrainState { epoch, step, rng, momentum })
+                let mut run = Vec::new();
+                if flag == 2 {
+                    // Each pair takes at least its two 4-byte lengths.
+                    let n = r.count("run record count", 8)?;
+                    for _ in 0..n {
+                        let k = r.text("run record key")?;
+                        let v = r.text("run record value")?;
+                        run.push((k, v));
+                    }
+                }
+                Some(TrainState { epoch, step, rng, momentum, run })
             }
             f => return Err(r.err(format!("training-state flag {f}"))),
         };

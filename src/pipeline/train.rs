@@ -414,6 +414,7 @@ pub fn train(
             step: sgd.steps(),
             rng: rng.state(),
             momentum: sgd.buffers(&model.params),
+            run: Vec::new(),
         };
         checkpoint(model, &state)?;
         reports.push(report);

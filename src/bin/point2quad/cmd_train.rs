@@ -3,7 +3,7 @@
 
 use crate::args::{Args, Spec};
 use crate::output::say;
-use point2quad::nn::checkpoint::{self, Checkpoint};
+use point2quad::nn::checkpoint::{self, Checkpoint, TrainState};
 use point2quad::pipeline::dataset::{load_sample, noise_variant, Sample, EXTENSION, VARIANT_SEP};
 use point2quad::pipeline::model::{Model, ModelConfig};
 use point2quad::pipeline::train::{train, Progress, TrainConfig};
@@ -44,7 +44,13 @@ OPTIONS:
                           of the encoder's first level, so every cloud looks equally
                           dense to it (a fresh model only) [off]
     --epochs N            total epochs, 1..100000 (a resumed run continues up to N) [40]
-    --resume CKPT         continue exactly from a MODEL.ckpt written earlier
+    --resume CKPT         continue exactly from a MODEL.ckpt written earlier: it
+                          records the run's --seed, --lr, --max-candidates, split
+                          (--val-fraction, --hold-out, --fold), --draws and
+                          augmentation, and a fingerprint of its samples; options
+                          left out are read from it, one given with another value
+                          is refused (--lr is taken, with a note), and other data
+                          is refused (--init starts a fine-tune on it)
     --init WEIGHTS        start from these weights (any weights file: its config is
                           used, refinement rounds are dropped) with a fresh optimiser,
                           learning-rate schedule and epoch count: a fine-tune
@@ -52,9 +58,7 @@ OPTIONS:
     --lr X                initial learning rate [0.01]
     --val-fraction F      share of samples held out for validation [0.15]
     --hold-out A,B,...    also hold out the samples with these names (e.g. whole
-                          meshes: qm_monkey,qm_feline); each must exist in DIR. The
-                          split is not stored in checkpoints: give the same
-                          --val-fraction, --hold-out and --fold when resuming
+                          meshes: qm_monkey,qm_feline); each must exist in DIR
     --max-candidates M    candidates drawn per step [12000]
     --fold I/K            also hold out fold I of K (0 <= I < K <= 16; the folds split
                           the samples by another hash of the name): K such runs give
@@ -64,12 +68,11 @@ OPTIONS:
                           each sample's first draw only (NAME), so training is exactly
                           that of the dataset without variants (`make train`: the
                           classifier reads first draws, its rounds every draw).
-                          Validation reads first draws either way; give the same
-                          value when resuming. (`refine --draws` defaults to first,
-                          this one to all) [all]
+                          Validation reads first draws either way. (`refine
+                          --draws` defaults to first, this one to all) [all]
 
-AUGMENTATION (per step, from the training RNG; not stored in checkpoints, so give
-the same options when resuming):
+AUGMENTATION (per step, from the training RNG; recorded in the checkpoint like the
+options above):
     --scale MIN,MAX       anisotropic scale: each axis of a random orthonormal frame
                           scaled by a factor uniform in [MIN, MAX), 0 < MIN <= MAX
                           [0.9,1.1]; 1,1 turns it off
@@ -321,6 +324,180 @@ fn augmentation(a: &Args, cfg: &mut TrainConfig) -> Result<()> {
     Ok(())
 }
 
+/// The options `--resume` continues a run with, as (record key, option that sets it).
+/// The checkpoint stores their values (and a fingerprint of the data, key `data`): an
+/// option left out on resume is read from it, one given with another value is refused
+/// (`--lr` excepted: taken, with a note).
+const RUN_OPTIONS: [(&str, &str); 10] = [
+    ("seed", "--seed"),
+    ("lr", "--lr"),
+    ("max-candidates", "--max-candidates"),
+    ("val-fraction", "--val-fraction"),
+    ("hold-out", "--hold-out"),
+    ("fold", "--fold"),
+    ("draws", "--draws"),
+    ("scale", "--scale"),
+    ("jitter", "--jitter"),
+    ("rotate", "--no-rotate"),
+];
+
+/// The options of a run that `--resume` must continue with (what a checkpoint's run
+/// record holds, besides the data's fingerprint).
+struct RunOptions<'a> {
+    cfg: &'a mut TrainConfig,
+    split: &'a mut Split,
+    all_draws: &'a mut bool,
+}
+
+impl RunOptions<'_> {
+    /// The value of record key `key` (one of `RUN_OPTIONS`), as text that `set` reads back.
+    fn get(&self, key: &str) -> String {
+        match key {
+            "seed" => self.cfg.seed.to_string(),
+            "lr" => self.cfg.sgd.lr.to_string(),
+            "max-candidates" => self.cfg.max_candidates.to_string(),
+            "val-fraction" => self.split.fraction.to_string(),
+            "hold-out" => self.split.names.join(","),
+            "fold" => self.split.fold.map(|(i, k)| format!("{i}/{k}")).unwrap_or_default(),
+            "draws" => (if *self.all_draws { "all" } else { "first" }).to_string(),
+            "scale" => self.cfg.scale.map_or("1,1".to_string(), |(lo, hi)| format!("{lo},{hi}")),
+            "jitter" => self.cfg.jitter.to_string(),
+            "rotate" => (if self.cfg.rotate { "yes" } else { "no" }).to_string(),
+            _ => unreachable!("not a run option: {key}"),
+        }
+    }
+
+    /// Sets record key `key` from `v` (as `get` wrote it); `None` when `v` does not parse.
+    fn set(&mut self, key: &str, v: &str) -> Option<()> {
+        match key {
+            "seed" => self.cfg.seed = v.parse().ok()?,
+            "lr" => self.cfg.sgd.lr = v.parse().ok().filter(|x: &f32| x.is_finite() && *x > 0.0)?,
+            "max-candidates" => self.cfg.max_candidates = v.parse().ok().filter(|&m: &usize| m >= 2)?,
+            "val-fraction" => {
+                self.split.fraction = v.parse().ok().filter(|f| (0.0..1.0).contains(f))?;
+            }
+            "hold-out" => {
+                self.split.names =
+                    if v.is_empty() { Vec::new() } else { v.split(',').map(str::to_string).collect() };
+            }
+            "fold" => {
+                self.split.fold = if v.is_empty() {
+                    None
+                } else {
+                    let (i, k) = v.split_once('/')?;
+                    let (i, k): (usize, usize) = (i.parse().ok()?, k.parse().ok()?);
+                    ((2..=MAX_FOLDS).contains(&k) && i < k).then_some(())?;
+                    Some((i, k))
+                };
+            }
+            "draws" => {
+                *self.all_draws = match v {
+                    "all" => true,
+                    "first" => false,
+                    _ => return None,
+                }
+            }
+            "scale" => {
+                let (lo, hi) = parse_scale(v).ok()?;
+                self.cfg.scale = if lo == 1.0 && hi == 1.0 { None } else { Some((lo, hi)) };
+            }
+            "jitter" => self.cfg.jitter = v.parse().ok().filter(|j| (0.0..=1.0).contains(j))?,
+            "rotate" => {
+                self.cfg.rotate = match v {
+                    "yes" => true,
+                    "no" => false,
+                    _ => return None,
+                }
+            }
+            _ => return None,
+        }
+        Some(())
+    }
+
+    /// The run record of these options and the data fingerprint `data`.
+    fn record(&self, data: &str) -> Vec<(String, String)> {
+        let mut r: Vec<(String, String)> =
+            RUN_OPTIONS.iter().map(|(k, _)| (k.to_string(), self.get(k))).collect();
+        r.push(("data".to_string(), data.to_string()));
+        r
+    }
+
+    /// Continues the run recorded in `record` (read from checkpoint `ckpt`): each option
+    /// the command line leaves out takes the recorded value; one given with another
+    /// value is a usage error, except `--lr` (taken, with a note: the schedule is
+    /// recomputed from it). Returns the recorded data fingerprint.
+    fn adopt(&mut self, a: &Args, ckpt: &str, record: &[(String, String)]) -> Result<Option<String>> {
+        let no_augment = a.switch("--no-augment");
+        let mut data = None;
+        for (key, stored) in record {
+            if key == "data" {
+                data = Some(stored.clone());
+                continue;
+            }
+            let Some(&(_, opt)) = RUN_OPTIONS.iter().find(|(k, _)| k == key) else {
+                say!("train: note: {ckpt} records {key} = {stored:?}, which this build does not read");
+                continue;
+            };
+            let now = self.get(key);
+            if &now == stored {
+                continue;
+            }
+            let augmentation = matches!(key.as_str(), "scale" | "jitter" | "rotate");
+            let given = if key == "rotate" { a.switch(opt) } else { a.value(opt).is_some() };
+            if given || (augmentation && no_augment) {
+                let opt = if given { opt } else { "--no-augment" };
+                if key == "lr" {
+                    say!(
+                        "train: note: --lr {now} with --resume: the run in {ckpt} used --lr {stored}; the schedule from epoch 1 is recomputed with {now}, so the run no longer continues exactly"
+                    );
+                    continue;
+                }
+                let was =
+                    if key == "rotate" { format!("rotate {stored}") } else { format!("{key} {stored:?}") };
+                return Err(Error::Usage(format!(
+                    "train: {opt} with --resume {ckpt}: the run there used {was}, this command gives {now:?}; give the same value, or leave the option out (--resume reads it from the checkpoint)"
+                )));
+            }
+            self.set(key, stored).ok_or_else(|| Error::Checkpoint {
+                path: ckpt.into(),
+                msg: format!("run record {key} = {stored:?} is not a valid value"),
+            })?;
+        }
+        Ok(data)
+    }
+}
+
+/// A fingerprint of the samples a run reads (names, points, candidates and labels, in
+/// name order; the features are computed from the first two): FNV-1a 64 in hex, after
+/// the sample count.
+fn data_fingerprint<'a>(samples: impl Iterator<Item = &'a Sample>) -> String {
+    let mut v: Vec<&Sample> = samples.collect();
+    v.sort_by(|x, y| x.name.cmp(&y.name));
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |bytes: &[u8]| {
+        for &b in bytes {
+            h = (h ^ b as u64).wrapping_mul(0x100_0000_01b3);
+        }
+    };
+    for s in &v {
+        eat(s.name.as_bytes());
+        eat(&(s.points.len() as u64).to_le_bytes());
+        for p in &s.points {
+            for c in p {
+                eat(&c.to_bits().to_le_bytes());
+            }
+        }
+        eat(&(s.candidates.len() as u64).to_le_bytes());
+        for q in &s.candidates {
+            for i in q {
+                eat(&i.to_le_bytes());
+            }
+        }
+        eat(&s.labels);
+    }
+    format!("{} samples, {h:016x}", v.len())
+}
+
 pub fn run(argv: &[String]) -> Result<()> {
     let cmd = "train";
     let a = Args::parse(cmd, argv, &SPEC)?;
@@ -333,11 +510,11 @@ pub fn run(argv: &[String]) -> Result<()> {
     cfg.sgd.lr = a.parsed(cmd, "--lr", cfg.sgd.lr)?;
     cfg.max_candidates = a.parsed(cmd, "--max-candidates", cfg.max_candidates)?;
     // One message per option, naming it and the value given.
-    let split = Split::from_args(cmd, &a)?.with_fold_arg(cmd, &a)?;
+    let mut split = Split::from_args(cmd, &a)?.with_fold_arg(cmd, &a)?;
     // `--draws first` trains on each sample's first noise draw only, exactly as on the
     // dataset written without `--noise-variants`; `all` (the default) takes one draw of
     // each sample per epoch, in turn.
-    let all_draws = draws_arg(cmd, &a, true)?;
+    let mut all_draws = draws_arg(cmd, &a, true)?;
     // Batch norm in train mode needs two rows: one candidate per step fails mid-epoch.
     if cfg.max_candidates < 2 {
         return Err(Error::Usage(format!(
@@ -388,20 +565,29 @@ pub fn run(argv: &[String]) -> Result<()> {
         crate::output::check_not_input(cmd, &out, Path::new(resume))?;
     }
 
+    // The data fingerprint in a resumed checkpoint's run record: the data must match it.
+    let mut resumed_data: Option<String> = None;
     let (mut model, resume) = match a.value("--resume") {
         Some(r) => {
             let ck = checkpoint::load(Path::new(r))?;
-            // The checkpoint holds the epoch, not the options: a rate given now sets the
-            // whole schedule, so say that the run continues exactly only with its own.
-            if let Some(lr) = a.value("--lr") {
-                say!(
-                    "train: note: --lr {lr} with --resume: the checkpoint does not store the rate, so the schedule from epoch 1 is recomputed with {lr}; the run continues exactly only with the --lr it started with"
-                );
-            }
             let state = ck.train.clone().ok_or_else(|| Error::Checkpoint {
                 path: r.into(),
                 msg: "holds weights only, no training state (resume from the .ckpt file)".into(),
             })?;
+            if state.run.is_empty() {
+                // A checkpoint of a build before the run record: the options are not in it.
+                say!(
+                    "train: note: {r} holds no record of its run's options (an older build wrote it): the run continues exactly only with the options it started with"
+                );
+                if let Some(lr) = a.value("--lr") {
+                    say!(
+                        "train: note: --lr {lr} with --resume: the schedule from epoch 1 is recomputed with {lr}, so the run continues exactly only if it started with it"
+                    );
+                }
+            } else {
+                let mut opts = RunOptions { cfg: &mut cfg, split: &mut split, all_draws: &mut all_draws };
+                resumed_data = opts.adopt(&a, r, &state.run)?;
+            }
             (Model::from_checkpoint(&ck, Path::new(r))?, Some(state))
         }
         None => match a.value("--init") {
@@ -488,6 +674,17 @@ pub fn run(argv: &[String]) -> Result<()> {
         model.config().preset,
         model.param_count()
     );
+    let fingerprint = data_fingerprint(tr.iter().chain(&va));
+    if let (Some(r), Some(was)) = (a.value("--resume"), &resumed_data) {
+        if *was != fingerprint {
+            return Err(Error::Usage(format!(
+                "train: --resume {r}: the samples in {} ({fingerprint}) are not those the run was trained on ({was}); resume on its own data, or start a fine-tune with --init",
+                data.display()
+            )));
+        }
+    }
+    let run_record =
+        RunOptions { cfg: &mut cfg, split: &mut split, all_draws: &mut all_draws }.record(&fingerprint);
     let start_epoch = resume.as_ref().map(|s| s.epoch as usize).unwrap_or(0);
     let t_train = std::time::Instant::now();
     let no_val = va.is_empty();
@@ -523,8 +720,9 @@ pub fn run(argv: &[String]) -> Result<()> {
             );
         }
     };
-    let mut save = |m: &Model, st: &point2quad::nn::checkpoint::TrainState| -> Result<()> {
-        checkpoint::save(&ckpt_path, &m.to_checkpoint(Some(st.clone())))?;
+    let mut save = |m: &Model, st: &TrainState| -> Result<()> {
+        let st = TrainState { run: run_record.clone(), ..st.clone() };
+        checkpoint::save(&ckpt_path, &m.to_checkpoint(Some(st)))?;
         let weights: Checkpoint = m.to_checkpoint(None);
         checkpoint::save(&out, &weights)
     };

@@ -3,7 +3,8 @@
 //! where a quad's cyclic order starts nor on the order of the candidate list; a model
 //! with rounds keeps its classifier exactly, round-trips through its weights file and
 //! config text; training the rounds separates real faces from rivals that the base
-//! probabilities cannot (average precision on held-out shapes rises).
+//! probabilities cannot (average precision on held-out shapes rises). The points inside
+//! each candidate (session 23's inside columns) equal a test of every point in f64.
 
 use point2quad::mesh::shapes;
 use point2quad::nn::checkpoint::Checkpoint;
@@ -11,8 +12,9 @@ use point2quad::pipeline::candidates::CandidateConfig;
 use point2quad::pipeline::dataset::build_sample;
 use point2quad::pipeline::model::{Model, ModelConfig};
 use point2quad::pipeline::refine::{
-    refine_features, refine_features_with, score_stats, train_refiner, RefineInput, RefineSample,
-    RefineTrainConfig, SideRule, FLOW_DIM, REFINE_DIM,
+    inside_points, refine_features, refine_features_with, score_stats, train_refiner, RefineInput,
+    RefineSample, RefineTrainConfig, SideRule, FLOW_DIM, INSIDE_DIM, INSIDE_MARGIN, INSIDE_PLANE_TOL,
+    REFINE_DIM,
 };
 use point2quad::pipeline::train::sample_input;
 use point2quad::rng::Rng;
@@ -196,6 +198,46 @@ fn reference_row(
     Some(row)
 }
 
+/// The points inside candidate `q` by the definition of `inside_points`, in f64, over
+/// every point; `None` when a point lies within 1e-4 · L̄ of a bound (f32 and f64 may
+/// then disagree) or the quad is degenerate.
+fn reference_inside(pts: &[[f32; 3]], q: [u32; 4]) -> Option<Vec<u32>> {
+    let p = q.map(|v| pts[v as usize].map(f64::from));
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    };
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let n = cross(sub(p[2], p[0]), sub(p[3], p[1]));
+    let nl = dot(n, n).sqrt();
+    let len = [0, 1, 2, 3].map(|e| len64(sub(p[(e + 1) % 4], p[e])));
+    if nl < 1e-6 || len.iter().any(|&l| l < 1e-6) {
+        return None;
+    }
+    let n = n.map(|x| x / nl);
+    let lbar = len.iter().sum::<f64>() / 4.0;
+    let centre = [0, 1, 2].map(|k| p.iter().map(|c| c[k]).sum::<f64>() / 4.0);
+    let (tol, m) = (f64::from(INSIDE_PLANE_TOL) * lbar, f64::from(INSIDE_MARGIN) * lbar);
+    let mut out = Vec::new();
+    for (v, r) in pts.iter().enumerate() {
+        if q.contains(&(v as u32)) {
+            continue;
+        }
+        let r = r.map(f64::from);
+        let off = dot(sub(r, centre), n).abs() - tol;
+        let edges: Vec<f64> =
+            (0..4).map(|e| dot(cross(n, sub(p[(e + 1) % 4], p[e])), sub(r, p[e])) / len[e] + m).collect();
+        let slack = edges.iter().fold(off.abs(), |a, &x| a.min(x.abs()));
+        if slack < 1e-4 * lbar {
+            return None;
+        }
+        if off <= 0.0 && edges.iter().all(|&x| x >= 0.0) {
+            out.push(v as u32);
+        }
+    }
+    Some(out)
+}
+
 /// Random candidate sets over few points (so that edges, diagonals and corners are
 /// shared a lot; the points at random positions, so candidates face every way), with
 /// probabilities that include exact ties and 0.5.
@@ -258,6 +300,48 @@ proptest! {
         }
     }
 
+    /// The points inside each candidate equal the f64 test of every point, on the random
+    /// sets and on the same sets flattened (so that points lie in many quads).
+    #[test]
+    fn inside_points_equal_the_brute_force_reference((pts, quads, _p, _b) in candidate_sets()) {
+        let flat: Vec<[f32; 3]> = pts.iter().map(|v| [v[0], v[1], 0.05 * v[2]]).collect();
+        for pts in [pts, flat] {
+            let (start, members) = inside_points(&pts, &quads, INSIDE_PLANE_TOL, INSIDE_MARGIN);
+            prop_assert_eq!(start.len(), quads.len() + 1);
+            prop_assert_eq!(start[quads.len()] as usize, members.len());
+            for (c, &q) in quads.iter().enumerate() {
+                let got = &members[start[c] as usize..start[c + 1] as usize];
+                if let Some(want) = reference_inside(&pts, q) {
+                    prop_assert_eq!(got, &want[..], "candidate {} {:?}", c, q);
+                }
+            }
+        }
+    }
+
+    /// The inside columns: the first 35 are the flow input's; 35 is the largest
+    /// probability mass at a point inside the candidate, 36 the most candidates above
+    /// 0.5 at one, / 4 (both 0 with no point inside).
+    #[test]
+    fn inside_features_equal_the_brute_force_reference((pts, quads, p, base) in candidate_sets()) {
+        let pts: Vec<[f32; 3]> = pts.iter().map(|v| [v[0], v[1], 0.05 * v[2]]).collect();
+        let f = refine_features_with(&quads, &pts, SideRule::Normals, RefineInput::Inside, &p, &base).unwrap();
+        prop_assert_eq!(f.len(), quads.len() * INSIDE_DIM);
+        let flow = refine_features_with(&quads, &pts, SideRule::Normals, RefineInput::Flow, &p, &base).unwrap();
+        for c in 0..quads.len() {
+            prop_assert_eq!(&f[c * INSIDE_DIM..c * INSIDE_DIM + FLOW_DIM], &flow[c * FLOW_DIM..(c + 1) * FLOW_DIM]);
+            let Some(inside) = reference_inside(&pts, quads[c]) else { continue };
+            let (mut mass, mut high) = (0.0f64, 0u32);
+            for &v in &inside {
+                let at = quads.iter().zip(&p).filter(|(q, _)| q.contains(&v));
+                mass = mass.max(at.clone().map(|(_, &x)| f64::from(x)).sum::<f64>());
+                high = high.max(at.filter(|(_, &x)| x > 0.5).count() as u32);
+            }
+            let got = &f[c * INSIDE_DIM + FLOW_DIM..(c + 1) * INSIDE_DIM];
+            prop_assert!((f64::from(got[0]) - mass).abs() <= 1e-5, "candidate {}: mass {} vs {}", c, got[0], mass);
+            prop_assert_eq!(got[1], high as f32 / 4.0, "candidate {}", c);
+        }
+    }
+
     /// Under the normals rule, reversing any candidates' cyclic orders (what an
     /// orientation seam does) changes no feature where the normals are clearly aligned
     /// or opposite: a reversed candidate runs every edge the other way and its normal
@@ -299,6 +383,7 @@ proptest! {
             (SideRule::Direction, RefineInput::Base),
             (SideRule::Normals, RefineInput::Base),
             (SideRule::Normals, RefineInput::Flow),
+            (SideRule::Normals, RefineInput::Inside),
         ] {
             let dim = input.dim();
             let f = refine_features_with(&quads, &pts, rule, input, &p, &base).unwrap();

@@ -222,8 +222,11 @@ impl ModelConfig {
                 self.refine_rounds
             )));
         }
-        if self.refine_input == RefineInput::Flow && self.refine_sides != SideRule::Normals {
-            return Err(Error::invalid("model config: refine_input = flow needs refine_sides = normals"));
+        if self.refine_input.reads_flow() && self.refine_sides != SideRule::Normals {
+            return Err(Error::invalid(format!(
+                "model config: refine_input = {} needs refine_sides = normals",
+                self.refine_input.name()
+            )));
         }
         match (&self.point_encoder, self.point_dim) {
             (None, 0) => Ok(()),

@@ -43,6 +43,16 @@ pub const REFINE_DIM: usize = 27;
 /// the 8 flow columns.
 pub const FLOW_DIM: usize = REFINE_DIM + 8;
 
+/// Values per candidate read by a round of [`RefineInput::Inside`]: [`FLOW_DIM`] and
+/// the 2 inside columns.
+pub const INSIDE_DIM: usize = FLOW_DIM + 2;
+
+/// The inside test of [`inside_points`] (the candidate ranking's, `CandidateConfig`'s
+/// defaults): plane tolerance and edge margin as fractions of the mean edge length.
+pub const INSIDE_PLANE_TOL: f32 = 0.3;
+/// See [`INSIDE_PLANE_TOL`].
+pub const INSIDE_MARGIN: f32 = 0.05;
+
 /// What a refinement round reads, fixed when the rounds are trained (`refine_input` in
 /// a model's config; models refined before session 18 have `Base`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -53,6 +63,10 @@ pub enum RefineInput {
     /// lattice ([`FLOW_DIM`]; [`refine_features_with`] documents the columns). Needs
     /// [`SideRule::Normals`].
     Flow,
+    /// Those and how much the points inside the candidate look like vertices of the
+    /// mesh ([`INSIDE_DIM`]; session 23): a quad spanning a point that likely faces use
+    /// as a corner covers a vertex, so it is not a face. Needs [`SideRule::Normals`].
+    Inside,
 }
 
 impl RefineInput {
@@ -61,7 +75,14 @@ impl RefineInput {
         match self {
             RefineInput::Base => REFINE_DIM,
             RefineInput::Flow => FLOW_DIM,
+            RefineInput::Inside => INSIDE_DIM,
         }
+    }
+
+    /// Whether the flow columns are read ([`RefineInput::Flow`] and
+    /// [`RefineInput::Inside`]); they need [`SideRule::Normals`].
+    pub fn reads_flow(self) -> bool {
+        self != RefineInput::Base
     }
 
     /// `base` / `flow`, as model files and `refine --features` spell it.
@@ -69,6 +90,7 @@ impl RefineInput {
         match self {
             RefineInput::Base => "base",
             RefineInput::Flow => "flow",
+            RefineInput::Inside => "inside",
         }
     }
 
@@ -77,6 +99,7 @@ impl RefineInput {
         match s {
             "base" => Some(RefineInput::Base),
             "flow" => Some(RefineInput::Flow),
+            "inside" => Some(RefineInput::Inside),
             _ => None,
         }
     }
@@ -100,8 +123,12 @@ pub struct CandidateGraph {
     n_points: usize,
     /// What [`CandidateGraph::features`] computes.
     input: RefineInput,
-    /// The positions, kept for [`RefineInput::Flow`] (empty otherwise).
+    /// The positions, kept for [`RefineInput::Flow`] and [`RefineInput::Inside`] (empty
+    /// otherwise).
     pts: Vec<[f32; 3]>,
+    /// For [`RefineInput::Inside`], [`inside_points`]: per candidate the points inside
+    /// it, as (starts, one more than the candidates; points). Empty otherwise.
+    inside: (Vec<u32>, Vec<u32>),
     /// Unordered pairs; slot `6·c + j` is pair j of candidate c (edges 0–3, then the
     /// diagonals (q0, q2), (q1, q3)).
     pairs: Groups,
@@ -296,8 +323,11 @@ impl CandidateGraph {
         rule: SideRule,
         input: RefineInput,
     ) -> Result<CandidateGraph> {
-        if input == RefineInput::Flow && rule != SideRule::Normals {
-            return Err(Error::invalid("refinement input flow needs sides read by normals"));
+        if input.reads_flow() && rule != SideRule::Normals {
+            return Err(Error::invalid(format!(
+                "refinement input {} needs sides read by normals",
+                input.name()
+            )));
         }
         let n_points = points.len();
         crate::pipeline::model::check_corners(quads, n_points)?;
@@ -349,8 +379,13 @@ impl CandidateGraph {
                 (Sides::Normals(crate::par::map(quads.len(), |c| quad_normal(points, quads[c])), tags), pairs)
             }
         };
-        let pts = if input == RefineInput::Flow { points.to_vec() } else { Vec::new() };
-        Ok(CandidateGraph { quads: quads.to_vec(), n_points, input, pts, pairs, sides })
+        let pts = if input.reads_flow() { points.to_vec() } else { Vec::new() };
+        let inside = if input == RefineInput::Inside {
+            inside_points(points, quads, INSIDE_PLANE_TOL, INSIDE_MARGIN)
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        Ok(CandidateGraph { quads: quads.to_vec(), n_points, input, pts, inside, pairs, sides })
     }
 
     /// Under [`SideRule::Normals`]: the best rival and the best neighbour of candidate
@@ -472,7 +507,8 @@ impl CandidateGraph {
             }
         }
         let dim = self.input.dim();
-        let flow = self.input == RefineInput::Flow;
+        let flow = self.input.reads_flow();
+        let inside = self.input == RefineInput::Inside;
         let mut out = vec![0.0f32; m * dim];
         crate::par::for_each_chunk_mut(&mut out, dim * 256, |ch, chunk| {
             for (r, row) in chunk.chunks_exact_mut(dim).enumerate() {
@@ -520,6 +556,16 @@ impl CandidateGraph {
                 if flow {
                     row[27..31].copy_from_slice(&sorted4(fl));
                     row[31..35].copy_from_slice(&sorted4(sz));
+                }
+                if inside {
+                    let (start, pts) = &self.inside;
+                    let (mut m_in, mut h_in) = (0.0f64, 0u32);
+                    for &v in &pts[start[c] as usize..start[c + 1] as usize] {
+                        m_in = m_in.max(mass[v as usize]);
+                        h_in = h_in.max(high[v as usize]);
+                    }
+                    row[35] = m_in as f32;
+                    row[36] = h_in as f32 / 4.0;
                 }
             }
         });
@@ -574,8 +620,15 @@ pub fn refine_features(
 ///   other side leaving it; the smaller of the two (1 on a regular grid);
 /// * 31–34: per edge, p_i × |ln(mean edge length of n_i / that of the candidate)|.
 ///
-/// The flow columns are invariant under rotation, translation and uniform scaling of
-/// the points, like the rest.
+/// For [`RefineInput::Inside`] those 35 and (session 23; the points inside a candidate
+/// are those of [`inside_points`], none of its corners):
+///
+/// * 35: the largest probability mass (column 14's sum, over all candidates) at a
+///   point inside the candidate, 0 when none is: a vertex the likely faces use;
+/// * 36: the largest number of candidates above 0.5 at a point inside it, / 4.
+///
+/// The flow and inside columns are invariant under rotation, translation and uniform
+/// scaling of the points, like the rest.
 ///
 /// # Errors
 /// As [`CandidateGraph::with_input`] and [`CandidateGraph::features`].
@@ -588,6 +641,73 @@ pub fn refine_features_with(
     base: &[f32],
 ) -> Result<Vec<f32>> {
     CandidateGraph::with_input(quads, points, rule, input)?.features(probs, base)
+}
+
+/// Per candidate, the points other than its corners that lie in it by the candidate
+/// ranking's inside test: within `plane_tol · L̄` of the plane through its centre normal
+/// to [`quad_normal`], and no farther than `margin · L̄` outside any of its edge lines
+/// (L̄ its mean edge length). As (starts, one more than the candidates; points, each
+/// candidate's ascending). A candidate with a zero-length edge or a zero normal has
+/// none.
+///
+/// # Panics
+/// If a corner indexes beyond `points`.
+pub fn inside_points(
+    points: &[[f32; 3]],
+    quads: &[[u32; 4]],
+    plane_tol: f32,
+    margin: f32,
+) -> (Vec<u32>, Vec<u32>) {
+    let tree = crate::spatial::kdtree::KdTree::build(points);
+    const CHUNK: usize = 1024;
+    let lists: Vec<(Vec<u32>, Vec<u32>)> = crate::par::map(quads.len().div_ceil(CHUNK), |ch| {
+        let (mut counts, mut members, mut near) = (Vec::new(), Vec::new(), Vec::new());
+        for &q in &quads[ch * CHUNK..((ch + 1) * CHUNK).min(quads.len())] {
+            let before = members.len();
+            let p = q.map(|v| points[v as usize]);
+            let n = quad_normal(points, q);
+            let len = [0, 1, 2, 3].map(|e| norm3(sub3(p[(e + 1) % 4], p[e])));
+            if n != [0.0; 3] && len.iter().all(|&l| l > 0.0 && l.is_finite()) {
+                let lbar = (len[0] + len[1] + len[2] + len[3]) / 4.0;
+                let centre = [0, 1, 2].map(|k| (p[0][k] + p[1][k] + p[2][k] + p[3][k]) / 4.0);
+                let (tol, m) = (plane_tol * lbar, margin * lbar);
+                // Inward edge-line normals (the quad runs counter-clockwise about n).
+                let en = [0, 1, 2, 3].map(|e| {
+                    let w = crate::pipeline::candidates::cross(n, sub3(p[(e + 1) % 4], p[e]));
+                    w.map(|x| x / len[e])
+                });
+                // A search radius that holds every passing point: a corner of the quad
+                // widened by the margin lies within m / sin(half its angle) of the
+                // corner, and candidate corners have sines ≥ 0.3 (8 m is more than that).
+                let reach = p.iter().map(|c| norm3(sub3(*c, centre))).fold(0.0f32, f32::max) + 8.0 * m;
+                tree.within_radius(centre, reach * reach + tol * tol, &mut near);
+                for x in &near {
+                    let v = x.index;
+                    if q.contains(&v) {
+                        continue;
+                    }
+                    let r = points[v as usize];
+                    let on_plane = dot3(sub3(r, centre), n).abs() <= tol;
+                    if on_plane && (0..4).all(|e| dot3(en[e], sub3(r, p[e])) >= -m) {
+                        members.push(v);
+                    }
+                }
+                members[before..].sort_unstable();
+            }
+            counts.push((members.len() - before) as u32);
+        }
+        (counts, members)
+    });
+    let mut start = Vec::with_capacity(quads.len() + 1);
+    start.push(0u32);
+    let mut all = Vec::new();
+    for (counts, members) in lists {
+        for c in counts {
+            start.push(start.last().copied().unwrap_or(0) + c);
+        }
+        all.extend(members);
+    }
+    (start, all)
 }
 
 /// A layer's weight transposed (`[cin × cout]`), bias (borrowed from the store), `cin`
@@ -649,8 +769,11 @@ impl Refiner {
         input: RefineInput,
         rng: &mut Rng,
     ) -> Result<Refiner> {
-        if input == RefineInput::Flow && sides != SideRule::Normals {
-            return Err(Error::invalid("refinement input flow needs sides read by normals"));
+        if input.reads_flow() && sides != SideRule::Normals {
+            return Err(Error::invalid(format!(
+                "refinement input {} needs sides read by normals",
+                input.name()
+            )));
         }
         let dim = input.dim();
         let mut out = Vec::with_capacity(rounds);

@@ -25,8 +25,9 @@ trains ROUNDS small MLPs one after the other: each reads, per candidate, its cur
 probability and those of its rivals and neighbours (the best other candidate on
 the same side of each edge, across each edge, over its diagonals, the probability
 mass at its corners; with --features flow also how the best neighbour across
-each edge continues the candidate's lattice lines and how its size compares) and
-gives a new probability. BASE's classifier (and point encoder) is
+each edge continues the candidate's lattice lines and how its size compares; with
+--features inside also how much the points inside the candidate look like
+vertices) and gives a new probability. BASE's classifier (and point encoder) is
 copied unchanged; rounds BASE already had are replaced. The validation split is
 train's (same hash of the sample name, same --val-fraction and --hold-out), so use the dataset
 BASE was trained on. MODEL is written atomically at the end (a run takes minutes).
@@ -58,8 +59,11 @@ OPTIONS:
                           (models refined before session 8) [normals]
     --features SET        what a round reads: flow = the probability columns and the
                           8 flow columns (the shipped weights since session 18; needs
-                          --sides normals); base = the probability columns alone
-                          (models refined before session 18) [flow]
+                          --sides normals); inside = flow and 2 columns on the
+                          points inside the candidate (the most probability mass
+                          and likely faces at one: a quad over a vertex is no
+                          face; needs --sides normals); base = the probability
+                          columns alone (models refined before session 18) [flow]
     --draws WHICH         samples of `dataset --noise-variants`: first = each sample's
                           first noise draw only (NAME; NAME~2 ... left out); all = every
                           draw, so the rounds also learn from BASE's scores on noise
@@ -120,12 +124,14 @@ pub fn run(argv: &[String]) -> Result<()> {
         Error::Usage(format!("refine: --sides {sides_name:?}: expected normals or direction"))
     })?;
     let input_name = a.value("--features").unwrap_or("flow");
-    let input = RefineInput::from_name(input_name)
-        .ok_or_else(|| Error::Usage(format!("refine: --features {input_name:?}: expected flow or base")))?;
-    if input == RefineInput::Flow && sides != SideRule::Normals {
-        return Err(Error::Usage(
-            "refine: --features flow needs --sides normals (use --features base)".into(),
-        ));
+    let input = RefineInput::from_name(input_name).ok_or_else(|| {
+        Error::Usage(format!("refine: --features {input_name:?}: expected flow, inside or base"))
+    })?;
+    if input.reads_flow() && sides != SideRule::Normals {
+        return Err(Error::Usage(format!(
+            "refine: --features {} needs --sides normals (use --features base)",
+            input.name()
+        )));
     }
     let mut cfg = RefineTrainConfig::default();
     cfg.epochs = a.parsed_in(cmd, "--epochs", cfg.epochs, 1, 1000, "passes per round")?;

@@ -5,6 +5,8 @@
 #   scripts/quality_table.sh BIN MESH_DIR [NOISE] [MODEL] [OUTDIR]
 # MODEL is a weights file, or a comma list of them (an ensemble: reconstruct --model A,B).
 # Extra reconstruct options can be given in RECONSTRUCT_ARGS (e.g. "--threshold 0.7").
+# Extra synth options in SYNTH_ARGS (e.g. "--jitter 0.02": vertices moved too); the
+# ground truth is then the mesh synth writes (--gt), not the file in MESH_DIR.
 # Example: scripts/quality_table.sh target/release/point2quad ../shared/data/quads/eval 0.1
 set -euo pipefail
 BIN=$1; DIR=$2; NOISE=${3:-0.1}; MODEL=${4:-}; OUT=${5:-out/quality}
@@ -13,13 +15,15 @@ JSONL="$OUT/metrics_noise${NOISE}.jsonl"; : > "$JSONL"
 for f in "$DIR"/*.obj "$DIR"/*.off "$DIR"/*.ply; do
   [ -e "$f" ] || continue
   name=$(basename "${f%.*}")
-  "$BIN" synth --from "$f" --noise "$NOISE" --seed 1 -o "$OUT/$name.xyz" 2>/dev/null
+  ref=$f
+  if [ -n "${SYNTH_ARGS:-}" ]; then ref=$OUT/$name.gt.obj; fi
+  "$BIN" synth --from "$f" --noise "$NOISE" --seed 1 -o "$OUT/$name.xyz" ${SYNTH_ARGS:+--gt "$ref"} ${SYNTH_ARGS:-} 2>/dev/null
   t0=$(date +%s.%N)
   if "$BIN" reconstruct "$OUT/$name.xyz" -o "$OUT/$name.obj" ${MODEL:+--model "$MODEL"} ${RECONSTRUCT_ARGS:-} \
        --svg "$OUT/$name.svg" 2> "$OUT/$name.log"; then
     t1=$(date +%s.%N)
-    json=$("$BIN" eval "$OUT/$name.obj" --gt "$f" --json)
-    gt=$("$BIN" eval "$f" --json)
+    json=$("$BIN" eval "$OUT/$name.obj" --gt "$ref" --json)
+    gt=$("$BIN" eval "$ref" --json)
     echo "{\"name\": \"$name\", \"seconds\": $(python3 -c "print(round($t1 - $t0, 3))"), \"pred\": $json, \"gt\": $gt}" >> "$JSONL"
   else
     echo "{\"name\": \"$name\", \"failed\": true}" >> "$JSONL"

@@ -1188,6 +1188,34 @@ fn resume_reads_the_run_from_the_checkpoint() {
     assert_eq!(read(&s.p("old.p2qm")), read(&straight));
 }
 
+/// `synth --jitter F` (session 23): the ground truth is the moved mesh, the cloud starts
+/// with its vertices (written back exactly), faces are the source's; `--jitter 0` writes
+/// what no jitter writes.
+#[test]
+fn synth_jitter_moves_the_ground_truth_with_the_cloud() {
+    let s = Scratch::new("synth_jitter");
+    let meshes = s.p("meshes");
+    write_meshes(&meshes);
+    let src = s.p("meshes/b_torus.obj");
+    let (cloud, gt) = (s.p("j.xyz"), s.p("j.obj"));
+    ok(&["synth", "--from", &src, "-o", &cloud, "--gt", &gt, "--jitter", "0.05", "--seed", "3"]);
+    let orig = point2quad::io::mesh_io::read_mesh(Path::new(&src)).unwrap();
+    let moved = point2quad::io::mesh_io::read_mesh(Path::new(&gt)).unwrap();
+    let pts = point2quad::io::points::read_points(Path::new(&cloud)).unwrap();
+    assert_eq!(moved.faces, orig.faces);
+    assert_eq!(&pts[..moved.vertices.len()], &moved.vertices[..]);
+    assert!(pts.len() > moved.vertices.len(), "noise points follow");
+    let used: std::collections::HashSet<u32> = orig.faces.iter().flatten().copied().collect();
+    for (v, (a, b)) in orig.vertices.iter().zip(&moved.vertices).enumerate() {
+        assert_eq!(a != b, used.contains(&(v as u32)), "vertex {v}");
+    }
+    let (plain, zero) = (s.p("plain.xyz"), s.p("zero.xyz"));
+    ok(&["synth", "--from", &src, "-o", &plain, "--seed", "3"]);
+    ok(&["synth", "--from", &src, "-o", &zero, "--seed", "3", "--jitter", "0"]);
+    assert_eq!(std::fs::read(&plain).unwrap(), std::fs::read(&zero).unwrap());
+    assert_ne!(std::fs::read(&plain).unwrap(), std::fs::read(&cloud).unwrap());
+}
+
 /// Session 21's review: a held-out copy takes its noise draws with it; a noise draw cannot
 /// be held out on its own; two files of one sample name are refused (splits and draw
 /// groups go by that name); mesh files whose names sanitise alike get samples apart.

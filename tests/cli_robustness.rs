@@ -392,6 +392,9 @@ fn bad_values_are_data_errors_without_output() {
         ("--noise", "1e9"),
         ("--offset", "nan"),
         ("--offset", "-0.5"),
+        ("--jitter", "nan"),
+        ("--jitter", "-0.1"),
+        ("--jitter", "1.5"),
     ] {
         let out = p2q(&["synth", "-o", &xyz, "--gt", &gt, flag, value]);
         assert_fails(&out, 2, &[flag], &format!("synth {flag} {value}"));

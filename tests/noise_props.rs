@@ -1,10 +1,15 @@
 //! Property tests of `pipeline::noise`: point count, every point within the stated normal
 //! distance of its face with its footprint on the face (checked against a brute-force
 //! point–triangle distance), determinism for a seed, and equivariance under scaling.
+//! Vertex jitter (`jitter_vertices`, `synth --jitter`): each step equals a reference
+//! that lists every vertex's face sides itself, scales with the mesh, has the stated
+//! spread, and zero jitter changes nothing and draws nothing.
 
 use point2quad::mesh::poly::QuadMesh;
 use point2quad::mesh::shapes;
-use point2quad::pipeline::noise::{face_unit_normal, noise_points, noise_samples, NoiseConfig};
+use point2quad::pipeline::noise::{
+    face_unit_normal, jitter_vertices, noise_points, noise_samples, NoiseConfig,
+};
 use point2quad::rng::Rng;
 use proptest::prelude::*;
 
@@ -108,6 +113,82 @@ proptest! {
         // rounding; allow none in practice but tolerate one such coincidence.
         prop_assert!(far <= 1, "{} points moved", far);
     }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(40))]
+
+    /// Each vertex moves by σ × (the mean length of the face sides at it) × three
+    /// normal draws, drawn vertex by vertex in order (unused vertices draw nothing and
+    /// stay); faces are kept. The reference lists each vertex's sides by scanning
+    /// every face for it.
+    #[test]
+    fn jitter_equals_the_reference(seed in 0u64..1_000_000, sigma in 0.0f64..0.3, k in -8i32..8) {
+        let mut rng = Rng::new(seed);
+        let mut mesh = shapes::random_shape(&mut rng);
+        // An unused vertex, which must stay.
+        mesh.vertices.push([0.5, -2.0, 7.0]);
+        let got = jitter_vertices(&mesh, sigma, &mut Rng::new(seed ^ 1)).unwrap();
+        prop_assert_eq!(&got.quads, &mesh.quads);
+        let mut draws = Rng::new(seed ^ 1);
+        for (v, (p, q)) in mesh.vertices.iter().zip(&got.vertices).enumerate() {
+            let mut sides = Vec::new();
+            for f in &mesh.quads {
+                if let Some(i) = f.iter().position(|&x| x as usize == v) {
+                    for w in [f[(i + 1) % 4], f[(i + 3) % 4]] {
+                        sides.push(len(sub(mesh.vertices[w as usize], *p)));
+                    }
+                }
+            }
+            if sides.is_empty() || sigma == 0.0 {
+                prop_assert_eq!(p, q, "vertex {} moved", v);
+                continue;
+            }
+            let s = sigma * sides.iter().sum::<f64>() / sides.len() as f64;
+            let step = [draws.normal(), draws.normal(), draws.normal()];
+            for i in 0..3 {
+                let want = p[i] + s * step[i];
+                prop_assert!((q[i] - want).abs() <= 1e-12 * (1.0 + want.abs()), "vertex {} axis {}: {} vs {}", v, i, q[i], want);
+            }
+        }
+        // Scaled by a power of two, every step scales exactly.
+        let f = 2f64.powi(k);
+        let scaled = QuadMesh { vertices: mesh.vertices.iter().map(|v| v.map(|c| c * f)).collect(), quads: mesh.quads.clone() };
+        let g = jitter_vertices(&scaled, sigma, &mut Rng::new(seed ^ 1)).unwrap();
+        prop_assert!(got.vertices.iter().zip(&g.vertices).all(|(a, b)| (0..3).all(|i| a[i] * f == b[i])));
+    }
+}
+
+/// Zero jitter returns the mesh and draws nothing; the spread of the steps is the stated
+/// one (a flat grid of unit squares: every vertex's mean side is 1); bad values and bad
+/// meshes are errors naming what is wrong.
+#[test]
+fn jitter_spread_zero_and_errors() {
+    let grid = shapes::grid(60, 60, 60.0, 60.0);
+    let mut rng = Rng::new(5);
+    let same = jitter_vertices(&grid, 0.0, &mut rng).unwrap();
+    assert_eq!(same, grid);
+    assert_eq!(rng.state(), Rng::new(5).state(), "zero jitter drew from the generator");
+    let moved = jitter_vertices(&grid, 0.05, &mut rng).unwrap();
+    let steps: Vec<f64> = grid
+        .vertices
+        .iter()
+        .zip(&moved.vertices)
+        .flat_map(|(a, b)| (0..3).map(move |i| b[i] - a[i]))
+        .collect();
+    let rms = (steps.iter().map(|x| x * x).sum::<f64>() / steps.len() as f64).sqrt();
+    // 11,163 draws: the RMS is within 3% of σ = 0.05 with near certainty.
+    assert!((rms / 0.05 - 1.0).abs() < 0.03, "rms {rms}");
+    for bad in [-0.1, f64::NAN, f64::INFINITY] {
+        let e = jitter_vertices(&grid, bad, &mut rng).unwrap_err().to_string();
+        assert!(e.contains("jitter"), "{e}");
+    }
+    let mut broken = grid.clone();
+    broken.quads[3][1] = 1_000_000;
+    assert!(jitter_vertices(&broken, 0.1, &mut rng).unwrap_err().to_string().contains("face 3"));
+    let mut nan = grid.clone();
+    nan.vertices[7][2] = f64::NAN;
+    assert!(jitter_vertices(&nan, 0.1, &mut rng).unwrap_err().to_string().contains("vertex 7"));
 }
 
 #[test]

@@ -144,6 +144,61 @@ pub fn face_unit_normal(mesh: &QuadMesh, fi: usize) -> Option<[f64; 3]> {
     crate::math::normalize(cross(sub(q[2], q[0]), sub(q[3], q[1])))
 }
 
+/// The mesh with every vertex moved by a Gaussian step of standard deviation `sigma`
+/// × the mean length of the edges at that vertex in each coordinate (scanner-like
+/// positional noise; `synth --jitter`, session 23). Faces are kept; a vertex no face
+/// uses stays where it is. `sigma` = 0 returns the mesh unchanged and draws nothing
+/// from `rng` (so what is drawn after it is as without jitter).
+///
+/// # Errors
+/// `InvalidInput` when `sigma` is negative or not finite, a face index is out of range,
+/// a vertex is not finite, or a moved vertex would not be finite.
+pub fn jitter_vertices(mesh: &QuadMesh, sigma: f64, rng: &mut Rng) -> Result<QuadMesh> {
+    if !(sigma.is_finite() && sigma >= 0.0) {
+        return Err(Error::invalid(format!("jitter must be finite and >= 0, got {sigma}")));
+    }
+    let nv = mesh.vertices.len();
+    if let Some(i) = mesh.vertices.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
+        return Err(Error::invalid(format!("vertex {i} has a non-finite coordinate")));
+    }
+    for (fi, q) in mesh.quads.iter().enumerate() {
+        if let Some(&v) = q.iter().find(|&&v| v as usize >= nv) {
+            return Err(Error::invalid(format!("face {fi} refers to vertex {v}, but the mesh has {nv}")));
+        }
+    }
+    if sigma == 0.0 {
+        return Ok(mesh.clone());
+    }
+    // Each face side once per face that has it: an edge of two faces counts twice at
+    // both its ends, which leaves the mean unchanged on a manifold mesh.
+    let (mut sum, mut count) = (vec![0.0f64; nv], vec![0u32; nv]);
+    for q in &mesh.quads {
+        for i in 0..4 {
+            let (a, b) = (q[i] as usize, q[(i + 1) % 4] as usize);
+            let l = norm(sub(mesh.vertices[a], mesh.vertices[b]));
+            for v in [a, b] {
+                sum[v] += l;
+                count[v] += 1;
+            }
+        }
+    }
+    let mut vertices = mesh.vertices.clone();
+    for (i, v) in vertices.iter_mut().enumerate() {
+        if count[i] == 0 {
+            continue;
+        }
+        let s = sigma * sum[i] / f64::from(count[i]);
+        let step = [rng.normal(), rng.normal(), rng.normal()];
+        *v = add(*v, scale(step, s));
+        if !v.iter().all(|c| c.is_finite()) {
+            return Err(Error::invalid(format!(
+                "jitter {sigma} moves vertex {i} beyond the floating-point range"
+            )));
+        }
+    }
+    Ok(QuadMesh { vertices, quads: mesh.quads.clone() })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -8,7 +8,7 @@ use point2quad::io::mesh_io::{prepare_mesh_with, read_mesh, MeshFormat, WriteOpt
 use point2quad::io::points::{prepare_points_xyz, PointFormat};
 use point2quad::mesh::poly::PolyMesh;
 use point2quad::mesh::shapes::{random_shape, random_shape_of, Family};
-use point2quad::pipeline::noise::{noise_points, NoiseConfig};
+use point2quad::pipeline::noise::{jitter_vertices, noise_points, NoiseConfig};
 use point2quad::rng::Rng;
 use point2quad::{Error, Result};
 use std::path::Path;
@@ -18,7 +18,7 @@ point2quad synth: a synthetic quad mesh as a noisy point cloud + its ground trut
 
 USAGE:
     point2quad synth -o CLOUD.xyz [--gt GT.{obj,ply,off}] [OPTIONS]
-    point2quad synth --from MESH -o CLOUD.xyz [--noise F] [--offset F] [--seed S]
+    point2quad synth --from MESH -o CLOUD.xyz [--gt GT] [--noise F] [--offset F] [--jitter F] [--seed S]
 
 The cloud holds the mesh's vertices, then round(noise × #vertices) noise points, each
 on a random face (area-weighted) moved along its normal by up to offset × the face's
@@ -33,10 +33,16 @@ OPTIONS:
     --seed S              random seed [0]
     --noise F             noise points per vertex [0.1]
     --offset F            noise distance along the normal, x mean edge length [0.1]
+    --jitter F            move every mesh vertex first by a Gaussian step, F x the
+                          mean length of its edges in each coordinate (scanner-like
+                          positional noise, 0 <= F <= 1); --gt then writes the moved
+                          mesh, whose vertices the cloud starts with [0]
 ";
 
-const SPEC: Spec =
-    Spec { valued: &["-o", "--from", "--gt", "--shape", "--seed", "--noise", "--offset"], switches: &[] };
+const SPEC: Spec = Spec {
+    valued: &["-o", "--from", "--gt", "--shape", "--seed", "--noise", "--offset", "--jitter"],
+    switches: &[],
+};
 
 pub fn run(argv: &[String]) -> Result<()> {
     let cmd = "synth";
@@ -65,6 +71,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let noise =
         NoiseConfig { fraction: a.parsed(cmd, "--noise", 0.1)?, offset: a.parsed(cmd, "--offset", 0.1)? };
     crate::cmd_dataset::check_noise(cmd, &noise)?;
+    let jitter = a.parsed_in(cmd, "--jitter", 0.0f64, 0.0, 1.0, "a fraction of the mean edge length")?;
     let mut rng = Rng::new(seed);
     let shape = a.value("--shape").unwrap_or("random");
     let mesh = if let Some(from) = a.value("--from") {
@@ -85,6 +92,8 @@ pub fn run(argv: &[String]) -> Result<()> {
         })?;
         random_shape_of(fam, &mut rng)
     };
+    // Drawn before the noise points (zero jitter draws nothing: the same cloud as without).
+    let mesh = jitter_vertices(&mesh, jitter, &mut rng)?;
     let mut cloud = mesh.vertices.clone();
     cloud.extend(noise_points(&mesh, &noise, &mut rng)?);
     // Both files in full before either replaces its target: half a result is worse

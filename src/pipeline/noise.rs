@@ -67,15 +67,8 @@ pub fn noise_samples(mesh: &QuadMesh, cfg: &NoiseConfig, rng: &mut Rng) -> Resul
     if !(cfg.offset.is_finite() && cfg.offset >= 0.0) {
         return Err(Error::invalid(format!("noise offset must be finite and >= 0, got {}", cfg.offset)));
     }
+    check_mesh(mesh)?;
     let nv = mesh.vertices.len();
-    if let Some(i) = mesh.vertices.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
-        return Err(Error::invalid(format!("vertex {i} has a non-finite coordinate")));
-    }
-    for (fi, q) in mesh.quads.iter().enumerate() {
-        if let Some(&v) = q.iter().find(|&&v| v as usize >= nv) {
-            return Err(Error::invalid(format!("face {fi} refers to vertex {v}, but the mesh has {nv}")));
-        }
-    }
     let wanted = (cfg.fraction * nv as f64).round();
     if wanted > MAX_NOISE_POINTS as f64 {
         return Err(Error::invalid(format!(
@@ -144,6 +137,20 @@ pub fn face_unit_normal(mesh: &QuadMesh, fi: usize) -> Option<[f64; 3]> {
     crate::math::normalize(cross(sub(q[2], q[0]), sub(q[3], q[1])))
 }
 
+/// `InvalidInput` naming the first non-finite vertex or out-of-range face index.
+fn check_mesh(mesh: &QuadMesh) -> Result<()> {
+    let nv = mesh.vertices.len();
+    if let Some(i) = mesh.vertices.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
+        return Err(Error::invalid(format!("vertex {i} has a non-finite coordinate")));
+    }
+    for (fi, q) in mesh.quads.iter().enumerate() {
+        if let Some(&v) = q.iter().find(|&&v| v as usize >= nv) {
+            return Err(Error::invalid(format!("face {fi} refers to vertex {v}, but the mesh has {nv}")));
+        }
+    }
+    Ok(())
+}
+
 /// The mesh with every vertex moved by a Gaussian step of standard deviation `sigma`
 /// × the mean length of the edges at that vertex in each coordinate (scanner-like
 /// positional noise; `synth --jitter`, session 23). Faces are kept; a vertex no face
@@ -157,15 +164,8 @@ pub fn jitter_vertices(mesh: &QuadMesh, sigma: f64, rng: &mut Rng) -> Result<Qua
     if !(sigma.is_finite() && sigma >= 0.0) {
         return Err(Error::invalid(format!("jitter must be finite and >= 0, got {sigma}")));
     }
+    check_mesh(mesh)?;
     let nv = mesh.vertices.len();
-    if let Some(i) = mesh.vertices.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
-        return Err(Error::invalid(format!("vertex {i} has a non-finite coordinate")));
-    }
-    for (fi, q) in mesh.quads.iter().enumerate() {
-        if let Some(&v) = q.iter().find(|&&v| v as usize >= nv) {
-            return Err(Error::invalid(format!("face {fi} refers to vertex {v}, but the mesh has {nv}")));
-        }
-    }
     if sigma == 0.0 {
         return Ok(mesh.clone());
     }

@@ -9,7 +9,11 @@
 //!   `min_glued` edges (so they fill a corner of the hole instead of growing outward) are
 //!   inserted, most-glued and most probable first, through [`HalfedgeMesh::add_face`], so
 //!   the mesh stays manifold. Two of those edges must border different faces: a quad
-//!   over two sides of one face would fold over it.
+//!   over two sides of one face would fold over it. Optionally (`lone_min_prob`, session
+//!   23) a candidate glued on one edge also goes in when one of its corners has no face
+//!   yet and the classifier believes it enough: an input point no face uses, next to a
+//!   hole, is a vertex the hole's faces need. (`add_face` keeps every vertex manifold,
+//!   so such a quad goes in only when both corners off the glued edge have no face.)
 
 use std::collections::HashMap;
 
@@ -29,11 +33,14 @@ pub struct RescueConfig {
     pub min_glued: usize,
     /// Passes over the boundary; each inserts what fits, the next sees the new border.
     pub max_passes: usize,
+    /// A candidate glued on a single edge is rescued too when a corner of it is a
+    /// vertex without faces and its probability is at least this (`None`: never).
+    pub lone_min_prob: Option<f32>,
 }
 
 impl Default for RescueConfig {
     fn default() -> Self {
-        RescueConfig { enabled: true, min_prob: 0.1, min_glued: 2, max_passes: 16 }
+        RescueConfig { enabled: true, min_prob: 0.1, min_glued: 2, max_passes: 16, lone_min_prob: None }
     }
 }
 
@@ -120,6 +127,14 @@ pub fn rescue_faces(
         }
         Some(g)
     };
+    // Whether candidate c may go in with `g` glued edges: `min_glued` of them, or one
+    // and a faceless corner (`lone_min_prob`).
+    let enough = |mesh: &HalfedgeMesh, c: usize, g: usize| {
+        g >= cfg.min_glued
+            || (g >= 1
+                && cfg.lone_min_prob.is_some_and(|t| probs[c] >= t)
+                && faces[c].iter().any(|&v| mesh.is_isolated(VertexId(v))))
+    };
     for pass in 1..=cfg.max_passes as u32 {
         let mut cands: Vec<(usize, f32, u32)> = Vec::new();
         for lp in mesh.boundary_loops() {
@@ -133,7 +148,7 @@ pub fn rescue_faces(
                     }
                     stamp[c] = pass;
                     if let Some(g) = glued(mesh, &faces[c]) {
-                        if g >= cfg.min_glued {
+                        if enough(mesh, c, g) {
                             cands.push((g, probs[c], c as u32));
                         }
                     }
@@ -147,7 +162,7 @@ pub fn rescue_faces(
             let c = c as usize;
             // Earlier insertions of this pass changed the border: check again.
             match glued(mesh, &faces[c]) {
-                Some(g) if g >= cfg.min_glued => {}
+                Some(g) if enough(mesh, c, g) => {}
                 _ => continue,
             }
             if mesh.add_face(faces[c].map(VertexId)).is_ok() {
@@ -226,6 +241,32 @@ mod tests {
         let off = RescueConfig { enabled: false, ..cfg };
         let mut m2 = HalfedgeMesh::from_quads(p.len(), &q[1..]).unwrap();
         assert!(rescue_faces(&mut m2, &q, &[0.5; 9], &[0], &off).is_empty());
+    }
+
+    /// Session 23's `lone_min_prob`: a 3 × 3 hole whose pool holds only the middle face of
+    /// each side (glued on one edge, two corners without faces). The default rescue takes
+    /// none; with the bound at or under their probability the first goes in, and so does
+    /// every other that does not meet a rescued one at a corner alone (that would make a
+    /// non-manifold vertex): faces 7 and 17 (face (i, j) is 5j + i), opposite each other.
+    #[test]
+    fn lone_corners_let_one_glued_edge_in() {
+        let (p, q) = grid(5);
+        let hole = |i: usize| matches!(i % 5, 1..=3) && matches!(i / 5, 1..=3);
+        let keep: Vec<[u32; 4]> = q.iter().enumerate().filter(|(i, _)| !hole(*i)).map(|(_, f)| *f).collect();
+        let sides = [q[7], q[11], q[13], q[17]];
+        let pool = [0, 1, 2, 3];
+        let fresh = || HalfedgeMesh::from_quads(p.len(), &keep).unwrap();
+        let probs = [0.35f32; 4];
+        let mut mesh = fresh();
+        assert!(rescue_faces(&mut mesh, &sides, &probs, &pool, &RescueConfig::default()).is_empty());
+        let above = RescueConfig { lone_min_prob: Some(0.4), ..RescueConfig::default() };
+        assert!(rescue_faces(&mut mesh, &sides, &probs, &pool, &above).is_empty());
+        assert_eq!(mesh, fresh());
+        let lone = RescueConfig { lone_min_prob: Some(0.3), ..RescueConfig::default() };
+        let got = rescue_faces(&mut mesh, &sides, &probs, &pool, &lone);
+        validate(&mesh).unwrap();
+        assert_eq!(got, vec![0, 3]);
+        assert_eq!(mesh.n_faces(), keep.len() + 2);
     }
 
     #[test]

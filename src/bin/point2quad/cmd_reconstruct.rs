@@ -43,6 +43,10 @@ OPTIONS:
                           (floaters; 0 keeps them) [4]
     --rescue-min-prob P   at holes, candidates scored under the threshold but at least P
                           are inserted where they glue to the border on 2+ edges [0.1]
+    --rescue-lone P       at holes, also rescue a candidate glued to the border on one
+                          edge only when one of its corners is a point no face uses
+                          yet and its probability is at least P, 0 <= P <= 1
+                          (session 23 experiment; default: never)
     --no-rescue           do not rescue candidates at holes
     --no-close            leave odd loops and loops the hole filling could not close
                           open (default: pair odd loops through the faces between
@@ -75,6 +79,7 @@ const SPEC: Spec = Spec {
         "--continue-rank",
         "--max-floater-faces",
         "--rescue-min-prob",
+        "--rescue-lone",
         "--merge-share",
     ],
     switches: &[
@@ -144,6 +149,10 @@ pub fn run(argv: &[String]) -> Result<()> {
     pp.rescue.min_prob =
         a.parsed_in(cmd, "--rescue-min-prob", pp.rescue.min_prob, 0.0, 1.0, "it is a probability")?;
     pp.rescue.enabled = !a.switch("--no-rescue");
+    if a.value("--rescue-lone").is_some() {
+        pp.rescue.lone_min_prob =
+            Some(a.parsed_in(cmd, "--rescue-lone", 0.5f32, 0.0, 1.0, "it is a probability")?);
+    }
     pp.close.enabled = !a.switch("--no-close");
     pp.close.seal = !a.switch("--no-seal");
     if a.switch("--no-inverted-fills") {

@@ -74,6 +74,16 @@ fn work_sizing_options_are_bounded() {
             huge,
         ),
         (vec!["reconstruct", c, "-o", &mesh, "--k", "65"], "--k must be between 3 and 64", "65"),
+        (
+            vec!["reconstruct", c, "-o", &mesh, "--per-point", "0"],
+            "--per-point must be between 1 and 1024",
+            "0",
+        ),
+        (
+            vec!["reconstruct", c, "-o", &mesh, "--per-point", "1025"],
+            "--per-point must be between 1 and 1024",
+            "1025",
+        ),
         (vec!["reconstruct", c, "-o", &mesh, "--k", huge], "--k must be between 3 and 64", huge),
         (
             vec!["dataset", "--out", &ds, "--synthetic", "100001"],
@@ -117,6 +127,32 @@ fn work_sizing_options_are_bounded() {
             assert!(idx.len() == 4 && idx.iter().all(|&i| i < 30), "{line}");
         }
     }
+}
+
+/// `reconstruct --per-point` (session 23) sizes the candidate budget as `candidates`
+/// does: the summary line counts the same candidates as `candidates --per-point`.
+#[test]
+fn reconstruct_per_point_sets_the_budget() {
+    let dir = Scratch::new("cli_per_point");
+    let c = &dir.write("sheet.xyz", sheet().as_bytes());
+    let count = |pp: &str| -> (usize, usize) {
+        let (mesh, cand) = (dir.p(&format!("m{pp}.obj")), dir.p(&format!("c{pp}.txt")));
+        let out = p2q(&["reconstruct", c, "-o", &mesh, "--per-point", pp]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let err = String::from_utf8_lossy(&out.stderr).to_string();
+        let n =
+            err.split(" candidates").next().and_then(|h| h.rsplit(' ').next()).and_then(|t| t.parse().ok());
+        let out = p2q(&["candidates", c, "-o", &cand, "--per-point", pp]);
+        assert!(out.status.success());
+        (
+            n.unwrap_or_else(|| panic!("no candidate count in {err}")),
+            std::fs::read_to_string(&cand).unwrap().lines().count(),
+        )
+    };
+    let (one, one_cli) = count("1");
+    let (many, many_cli) = count("64");
+    assert_eq!((one, many), (one_cli, many_cli));
+    assert!(one < many, "{one} vs {many}");
 }
 
 /// `--continue-rank` adds candidates and keeps every one found without it (a budget of

@@ -36,6 +36,8 @@ OPTIONS:
                           (may be non-manifold: the paper's raw output)
     --threshold T         probability above which a candidate is kept [0.5]
     --k K                 neighbours searched per point for candidates, 3 to 64 [20]
+    --per-point P         candidates kept per proposing point before de-duplication,
+                          1 to 1024; the shipped weights were trained with 32 [32]
     --continue-rank R     lattice continuation: candidates ranked below R (0 to 1000)
                           propose the quads across their sides, snapped to the
                           nearest points (0 turns it off) [2]
@@ -76,6 +78,7 @@ const SPEC: Spec = Spec {
         "--svg",
         "--threshold",
         "--k",
+        "--per-point",
         "--continue-rank",
         "--max-floater-faces",
         "--rescue-min-prob",
@@ -136,6 +139,14 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     cfg.candidates.k =
         a.parsed_in(cmd, "--k", cfg.candidates.k, 3, MAX_K, "work grows with the cube of k")?;
+    cfg.candidates.per_point = a.parsed_in(
+        cmd,
+        "--per-point",
+        cfg.candidates.per_point,
+        1,
+        crate::cmd_candidates::MAX_PER_POINT,
+        "more keeps every candidate anyway",
+    )?;
     cfg.candidates.continue_rank = a.parsed_in(
         cmd,
         "--continue-rank",

@@ -1112,7 +1112,7 @@ fn resume_reads_the_run_from_the_checkpoint() {
         "--val-fraction",
         "0.3",
         "--hold-out",
-        "a_sphere",
+        "b_torus,a_sphere",
         "--jitter",
         "0.02",
         "--scale",
@@ -1137,8 +1137,16 @@ fn resume_reads_the_run_from_the_checkpoint() {
     let run = checkpoint::load(Path::new(&ckpt)).unwrap().train.unwrap().run;
     let get = |k: &str| run.iter().find(|(key, _)| key == k).map(|(_, v)| v.as_str());
     assert_eq!(
-        (get("seed"), get("lr"), get("hold-out"), get("scale"), get("rotate"), get("draws")),
-        (Some("3"), Some("0.02"), Some("a_sphere"), Some("0.8,1.2"), Some("no"), Some("all"))
+        (get("epochs"), get("seed"), get("lr"), get("hold-out"), get("scale"), get("rotate"), get("draws")),
+        (
+            Some("2"),
+            Some("3"),
+            Some("0.02"),
+            Some("a_sphere,b_torus"),
+            Some("0.8,1.2"),
+            Some("no"),
+            Some("all")
+        )
     );
     assert!(get("data").is_some_and(|d| d.contains("samples")), "{run:?}");
     // The same options given again are no conflict; another value is refused, before
@@ -1156,8 +1164,11 @@ fn resume_reads_the_run_from_the_checkpoint() {
         )
     };
     for (extra, names) in [
+        (vec!["--config", "default"], ["--config", "--resume"]),
         (vec!["--seed", "4"], ["--seed", "seed \"3\""]),
-        (vec!["--hold-out", "b_torus"], ["--hold-out", "\"a_sphere\""]),
+        (vec!["--fold", "0/2"], ["--fold", "fold \"\""]),
+        (vec!["--scale", "0.9,1.1"], ["--scale", "\"0.8,1.2\""]),
+        (vec!["--hold-out", "c_tube"], ["--hold-out", "\"a_sphere,b_torus\""]),
         (vec!["--val-fraction", "0.1"], ["--val-fraction", "\"0.3\""]),
         (vec!["--max-candidates", "200"], ["--max-candidates", "\"300\""]),
         (vec!["--draws", "first"], ["--draws", "\"all\""]),
@@ -1167,6 +1178,27 @@ fn resume_reads_the_run_from_the_checkpoint() {
         let e = resume(&extra, 2);
         assert!(names.iter().all(|n| e.contains(n)), "{extra:?}: {e}");
     }
+    // The hold-out names in another order (or repeated) are the same split.
+    let swapped = s.p("swapped.p2qm");
+    let swap = [&opts[..9], &["a_sphere,b_torus,a_sphere"], &opts[10..]].concat();
+    train(&swapped, "2", &[&swap[..], &["--resume", &ckpt]].concat());
+    assert_eq!(read(&swapped), read(&straight));
+    // Without --epochs the recorded count is the goal: the part run's checkpoint, its
+    // record saying 2 (as an interrupted two-epoch run's would), ends where the
+    // uninterrupted run does.
+    let mut two = checkpoint::load(Path::new(&ckpt)).unwrap();
+    let st = two.train.as_mut().unwrap();
+    assert_eq!(st.run.iter().find(|(k, _)| k == "epochs").map(|(_, v)| v.as_str()), Some("1"));
+    for (k, v) in st.run.iter_mut() {
+        if k == "epochs" {
+            *v = "2".into();
+        }
+    }
+    let two_ckpt = s.p("two.ckpt");
+    checkpoint::save(Path::new(&two_ckpt), &two).unwrap();
+    let cont = s.p("cont.p2qm");
+    ok(&["train", "--data", &data, "--out", &cont, "--resume", &two_ckpt]);
+    assert_eq!(read(&cont), read(&straight));
     // Another dataset is refused.
     let e = fails(&["train", "--data", &other, "--out", &never, "--epochs", "2", "--resume", &ckpt], 2);
     assert!(e.contains("not those the run was trained on") && e.contains("other"), "{e}");

@@ -445,6 +445,24 @@ proptest! {
     }
 }
 
+/// Session 23's review: a sharp kite (a 4° tip) keeps a point inside near its tip, past
+/// the 8 × margin a fixed search radius reached; the search widens with the corner.
+#[test]
+fn inside_points_reach_sharp_corners() {
+    let t = 4f32.to_radians() / 2.0;
+    // Tip at the origin, pointing to −x; the kite runs counter-clockwise about +z.
+    let (l, w) = (10.0f32, 10.0 * t.tan());
+    let mut pts = vec![[0.0, 0.0, 0.0], [l, -w, 0.0], [l + 1.0, 0.0, 0.0], [l, w, 0.0]];
+    // Just outside the tip, within the margin of both edge lines.
+    let lbar = (2.0 * (l * l + w * w).sqrt() + 2.0 * (1.0 + w * w).sqrt()) / 4.0;
+    pts.push([-0.8 * INSIDE_MARGIN * lbar / t.sin(), 0.0, 0.0]);
+    pts.push([-3.0 * INSIDE_MARGIN * lbar / t.sin(), 0.0, 0.0]);
+    let quads = [[0u32, 1, 2, 3]];
+    let (start, members) = inside_points(&pts, &quads, INSIDE_PLANE_TOL, INSIDE_MARGIN);
+    assert_eq!(&members[start[0] as usize..start[1] as usize], &[4]);
+    assert_eq!(reference_inside(&pts, quads[0]), Some(vec![4]));
+}
+
 #[test]
 fn features_refuse_bad_inputs() {
     let q = vec![[0u32, 1, 2, 3]];
@@ -523,9 +541,10 @@ fn refined_model_keeps_the_classifier_and_round_trips() {
         ("refine_rounds = 1\nrefine_widths = 8\nrefine_sides = left\n", "direction or normals"),
         (
             "refine_rounds = 1\nrefine_widths = 8\nrefine_sides = normals\nrefine_input = lattice\n",
-            "base or flow",
+            "base, flow or inside",
         ),
         ("refine_rounds = 1\nrefine_widths = 8\nrefine_input = flow\n", "needs refine_sides = normals"),
+        ("refine_rounds = 1\nrefine_widths = 8\nrefine_input = inside\n", "needs refine_sides = normals"),
     ] {
         let err = ModelConfig::from_text(&format!("{plain}{extra}"), Path::new("cfg")).unwrap_err();
         assert!(err.to_string().contains(why), "{extra:?}: {err}");
@@ -553,6 +572,15 @@ fn refined_model_keeps_the_classifier_and_round_trips() {
     let fback = Model::from_bytes(&flow.to_checkpoint(None).to_bytes(), Path::new("mem")).unwrap();
     assert_eq!(fback.predict_with_points(&s.points, &s.candidates, &x).unwrap(), fgot);
     assert!(base.with_refinement_reading(1, &[8], SideRule::Direction, RefineInput::Flow, 0).is_err());
+    // The same for rounds that read the inside columns (session 23).
+    let inside = base.with_refinement_reading(2, &[8, 8], SideRule::Normals, RefineInput::Inside, 5).unwrap();
+    let itext = inside.config().to_text();
+    assert!(itext.contains("refine_input = inside"), "{itext}");
+    assert_eq!(&ModelConfig::from_text(&itext, Path::new("cfg")).unwrap(), inside.config());
+    let igot = inside.predict_with_points(&s.points, &s.candidates, &x).unwrap();
+    let iback = Model::from_bytes(&inside.to_checkpoint(None).to_bytes(), Path::new("mem")).unwrap();
+    assert_eq!(iback.predict_with_points(&s.points, &s.candidates, &x).unwrap(), igot);
+    assert!(base.with_refinement_reading(1, &[8], SideRule::Direction, RefineInput::Inside, 0).is_err());
     // Bad settings.
     assert!(base.with_refinement(9, &[8], SideRule::Normals, 0).is_err());
     assert!(base.with_refinement(1, &[0], SideRule::Normals, 0).is_err());

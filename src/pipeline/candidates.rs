@@ -126,8 +126,8 @@ impl Default for CandidateConfig {
             min_normal_dot: 0.5,
             max_edge_over_spacing: 20.0,
             per_point: 32,
-            inside_plane_tol: 0.3,
-            inside_margin: 0.05,
+            inside_plane_tol: DEFAULT_INSIDE_PLANE_TOL,
+            inside_margin: DEFAULT_INSIDE_MARGIN,
             w_inside_first: 0.3,
             w_inside: 1.0,
             w_length: 1.0,
@@ -983,6 +983,11 @@ fn inside_count(c: &Pre, rel: &[[f32; 3]], cfg: &CandidateConfig) -> u16 {
 /// One kept candidate of one proposer: (sorted vertex key, canonical cyclic quad,
 /// rank, score, inside count).
 type Entry = ([u32; 4], [u32; 4], u16, f32, u16);
+
+/// The default plane tolerance of the inside test ([`CandidateConfig::inside_plane_tol`]).
+pub const DEFAULT_INSIDE_PLANE_TOL: f32 = 0.3;
+/// The default edge margin of the inside test ([`CandidateConfig::inside_margin`]).
+pub const DEFAULT_INSIDE_MARGIN: f32 = 0.05;
 
 /// Largest neighbour count ([`CandidateConfig`]'s `k`, `normal_k`, `spacing_k`) that
 /// [`generate`] accepts: candidate enumeration grows with the cube of `k` (C(k, 3)

@@ -373,8 +373,8 @@ impl ModelConfig {
                     optional_seen += 1;
                 }
                 "refine_input" => {
-                    c.refine_input =
-                        RefineInput::from_name(v).ok_or_else(|| bad("refine_input must be base or flow"))?;
+                    c.refine_input = RefineInput::from_name(v)
+                        .ok_or_else(|| bad("refine_input must be base, flow or inside"))?;
                     optional_seen += 1;
                 }
                 _ if k.starts_with("kp_") => {
@@ -668,8 +668,8 @@ impl Model {
     /// As [`Model::with_refinement`], with rounds that read `input`.
     ///
     /// # Errors
-    /// As [`Model::with_refinement`]; `InvalidInput` for [`RefineInput::Flow`] with
-    /// [`SideRule::Direction`].
+    /// As [`Model::with_refinement`]; `InvalidInput` for [`RefineInput::Flow`] or
+    /// [`RefineInput::Inside`] with [`SideRule::Direction`].
     pub fn with_refinement_reading(
         &self,
         rounds: usize,

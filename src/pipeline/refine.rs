@@ -47,11 +47,11 @@ pub const FLOW_DIM: usize = REFINE_DIM + 8;
 /// the 2 inside columns.
 pub const INSIDE_DIM: usize = FLOW_DIM + 2;
 
-/// The inside test of [`inside_points`] (the candidate ranking's, `CandidateConfig`'s
-/// defaults): plane tolerance and edge margin as fractions of the mean edge length.
-pub const INSIDE_PLANE_TOL: f32 = 0.3;
-/// See [`INSIDE_PLANE_TOL`].
-pub const INSIDE_MARGIN: f32 = 0.05;
+/// The inside test of the rounds' [`inside_points`]: the candidate ranking's default
+/// plane tolerance and edge margin, as fractions of the mean edge length.
+pub use crate::pipeline::candidates::{
+    DEFAULT_INSIDE_MARGIN as INSIDE_MARGIN, DEFAULT_INSIDE_PLANE_TOL as INSIDE_PLANE_TOL,
+};
 
 /// What a refinement round reads, fixed when the rounds are trained (`refine_input` in
 /// a model's config; models refined before session 18 have `Base`).
@@ -85,7 +85,7 @@ impl RefineInput {
         self != RefineInput::Base
     }
 
-    /// `base` / `flow`, as model files and `refine --features` spell it.
+    /// `base` / `flow` / `inside`, as model files and `refine --features` spell it.
     pub fn name(self) -> &'static str {
         match self {
             RefineInput::Base => "base",
@@ -314,9 +314,9 @@ impl CandidateGraph {
     /// As [`CandidateGraph::new`], for rounds that read `input`.
     ///
     /// # Errors
-    /// As [`CandidateGraph::new`]; `InvalidInput` for [`RefineInput::Flow`] with
-    /// [`SideRule::Direction`] (the flow columns need each neighbour's identity, which
-    /// only the normals rule scans for).
+    /// As [`CandidateGraph::new`]; `InvalidInput` for [`RefineInput::Flow`] or
+    /// [`RefineInput::Inside`] with [`SideRule::Direction`] (the flow columns need each
+    /// neighbour's identity, which only the normals rule scans for).
     pub fn with_input(
         quads: &[[u32; 4]],
         points: &[[f32; 3]],
@@ -648,7 +648,10 @@ pub fn refine_features_with(
 /// to [`quad_normal`], and no farther than `margin · L̄` outside any of its edge lines
 /// (L̄ its mean edge length). As (starts, one more than the candidates; points, each
 /// candidate's ascending). A candidate with a zero-length edge or a zero normal has
-/// none.
+/// none. The search reaches every passing point of a convex quad (every candidate is
+/// one): its corners widened by the margin, m / sin(θ/2) for a corner of angle θ in the
+/// plane; a quad with a corner under 0.1° or a reflex one gets the whole cloud
+/// searched.
 ///
 /// # Panics
 /// If a corner indexes beyond `points`.
@@ -678,9 +681,21 @@ pub fn inside_points(
                 });
                 // A search radius that holds every passing point: a corner of the quad
                 // widened by the margin lies within m / sin(half its angle) of the
-                // corner, and candidate corners have sines ≥ 0.3 (8 m is more than that).
-                let reach = p.iter().map(|c| norm3(sub3(*c, centre))).fold(0.0f32, f32::max) + 8.0 * m;
-                tree.within_radius(centre, reach * reach + tol * tol, &mut near);
+                // corner (angles in the plane normal to n).
+                let flat = |d: [f32; 3]| sub3(d, n.map(|x| x * dot3(d, n)));
+                let mut widen = 0.0f32;
+                for k in 0..4 {
+                    let (u, v) = (flat(sub3(p[(k + 1) % 4], p[k])), flat(sub3(p[(k + 3) % 4], p[k])));
+                    let c = crate::pipeline::candidates::cross(u, v);
+                    let angle = norm3(c).atan2(dot3(u, v));
+                    let half = (0.5 * angle).sin();
+                    // A reflex corner (the turn against n) or one under 0.1°: search all.
+                    let convex = dot3(c, n) > 0.0 && half > 1e-3;
+                    widen = widen.max(if convex { m / half } else { f32::INFINITY });
+                }
+                let reach = p.iter().map(|c| norm3(sub3(*c, centre))).fold(0.0f32, f32::max) + widen;
+                let r2 = reach * reach + tol * tol;
+                tree.within_radius(centre, if r2.is_finite() { r2 } else { f32::MAX }, &mut near);
                 for x in &near {
                     let v = x.index;
                     if q.contains(&v) {
@@ -1170,7 +1185,7 @@ mod tests {
     /// training path) up to float rounding, and a wrong weight would show.
     #[test]
     fn row_inference_equals_the_tape_forward() {
-        for input in [RefineInput::Base, RefineInput::Flow] {
+        for input in [RefineInput::Base, RefineInput::Flow, RefineInput::Inside] {
             row_inference_case(input);
         }
     }

@@ -3,7 +3,7 @@
 
 use crate::args::{Args, Spec};
 use crate::output::say;
-use point2quad::nn::checkpoint::{self, Checkpoint, TrainState};
+use point2quad::nn::checkpoint::{self, Checkpoint, Fnv1a, TrainState};
 use point2quad::pipeline::dataset::{load_sample, noise_variant, Sample, EXTENSION, VARIANT_SEP};
 use point2quad::pipeline::model::{Model, ModelConfig};
 use point2quad::pipeline::train::{train, Progress, TrainConfig};
@@ -108,7 +108,7 @@ const SPEC: Spec = Spec {
 };
 
 fn fnv(s: &str) -> u64 {
-    s.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
+    point2quad::nn::checkpoint::fnv1a64(s.as_bytes())
 }
 
 /// `--draws first|all` of `train` and `refine` (`dataset --noise-variants`): whether every
@@ -117,12 +117,28 @@ fn fnv(s: &str) -> u64 {
 pub(crate) fn draws_arg(cmd: &str, a: &Args, default_all: bool) -> Result<bool> {
     match a.value("--draws") {
         None => Ok(default_all),
-        Some("first") => Ok(false),
-        Some("all") => Ok(true),
-        Some(other) => Err(Error::Usage(format!(
-            "{cmd}: --draws {other:?}: expected first or all (see `point2quad {cmd} --help`)"
-        ))),
+        Some(v) => parse_draws(v).ok_or_else(|| {
+            Error::Usage(format!(
+                "{cmd}: --draws {v:?}: expected first or all (see `point2quad {cmd} --help`)"
+            ))
+        }),
     }
+}
+
+/// `first` → false, `all` → true (whether every noise draw is read).
+fn parse_draws(v: &str) -> Option<bool> {
+    match v {
+        "first" => Some(false),
+        "all" => Some(true),
+        _ => None,
+    }
+}
+
+/// `I/K` with 0 <= I < K <= [`MAX_FOLDS`].
+fn parse_fold(v: &str) -> Option<(usize, usize)> {
+    let (i, k) = v.split_once('/')?;
+    let (i, k): (usize, usize) = (i.trim().parse().ok()?, k.trim().parse().ok()?);
+    ((2..=MAX_FOLDS).contains(&k) && i < k).then_some((i, k))
 }
 
 /// The validation split shared by `train` and `refine`: a sample is held out when a hash
@@ -167,18 +183,11 @@ impl Split {
     /// `--fold I/K` of `a` into the split (train's option), checked.
     pub(crate) fn with_fold_arg(mut self, cmd: &str, a: &Args) -> Result<Split> {
         if let Some(v) = a.value("--fold") {
-            let bad = || {
+            self.fold = Some(parse_fold(v).ok_or_else(|| {
                 Error::Usage(format!(
                     "{cmd}: --fold {v:?}: expected I/K with 0 <= I < K <= {MAX_FOLDS}, e.g. 0/2"
                 ))
-            };
-            let (i, k) = v.split_once('/').ok_or_else(bad)?;
-            let i: usize = i.trim().parse().map_err(|_| bad())?;
-            let k: usize = k.trim().parse().map_err(|_| bad())?;
-            if !(2..=MAX_FOLDS).contains(&k) || i >= k {
-                return Err(bad());
-            }
-            self.fold = Some((i, k));
+            })?);
         }
         Ok(self)
     }
@@ -327,8 +336,9 @@ fn augmentation(a: &Args, cfg: &mut TrainConfig) -> Result<()> {
 /// The options `--resume` continues a run with, as (record key, option that sets it).
 /// The checkpoint stores their values (and a fingerprint of the data, key `data`): an
 /// option left out on resume is read from it, one given with another value is refused
-/// (`--lr` excepted: taken, with a note).
-const RUN_OPTIONS: [(&str, &str); 10] = [
+/// (`--lr` excepted: taken, with a note; and `--epochs`, which a resume may raise).
+const RUN_OPTIONS: [(&str, &str); 11] = [
+    ("epochs", "--epochs"),
     ("seed", "--seed"),
     ("lr", "--lr"),
     ("max-candidates", "--max-candidates"),
@@ -353,11 +363,18 @@ impl RunOptions<'_> {
     /// The value of record key `key` (one of `RUN_OPTIONS`), as text that `set` reads back.
     fn get(&self, key: &str) -> String {
         match key {
+            "epochs" => self.cfg.epochs.to_string(),
             "seed" => self.cfg.seed.to_string(),
             "lr" => self.cfg.sgd.lr.to_string(),
             "max-candidates" => self.cfg.max_candidates.to_string(),
             "val-fraction" => self.split.fraction.to_string(),
-            "hold-out" => self.split.names.join(","),
+            // Sorted: the order the names were given in does not change the split.
+            "hold-out" => {
+                let mut v = self.split.names.clone();
+                v.sort();
+                v.dedup();
+                v.join(",")
+            }
             "fold" => self.split.fold.map(|(i, k)| format!("{i}/{k}")).unwrap_or_default(),
             "draws" => (if *self.all_draws { "all" } else { "first" }).to_string(),
             "scale" => self.cfg.scale.map_or("1,1".to_string(), |(lo, hi)| format!("{lo},{hi}")),
@@ -370,6 +387,7 @@ impl RunOptions<'_> {
     /// Sets record key `key` from `v` (as `get` wrote it); `None` when `v` does not parse.
     fn set(&mut self, key: &str, v: &str) -> Option<()> {
         match key {
+            "epochs" => self.cfg.epochs = v.parse().ok().filter(|e| (1..=100_000).contains(e))?,
             "seed" => self.cfg.seed = v.parse().ok()?,
             "lr" => self.cfg.sgd.lr = v.parse().ok().filter(|x: &f32| x.is_finite() && *x > 0.0)?,
             "max-candidates" => self.cfg.max_candidates = v.parse().ok().filter(|&m: &usize| m >= 2)?,
@@ -380,23 +398,8 @@ impl RunOptions<'_> {
                 self.split.names =
                     if v.is_empty() { Vec::new() } else { v.split(',').map(str::to_string).collect() };
             }
-            "fold" => {
-                self.split.fold = if v.is_empty() {
-                    None
-                } else {
-                    let (i, k) = v.split_once('/')?;
-                    let (i, k): (usize, usize) = (i.parse().ok()?, k.parse().ok()?);
-                    ((2..=MAX_FOLDS).contains(&k) && i < k).then_some(())?;
-                    Some((i, k))
-                };
-            }
-            "draws" => {
-                *self.all_draws = match v {
-                    "all" => true,
-                    "first" => false,
-                    _ => return None,
-                }
-            }
+            "fold" => self.split.fold = if v.is_empty() { None } else { Some(parse_fold(v)?) },
+            "draws" => *self.all_draws = parse_draws(v)?,
             "scale" => {
                 let (lo, hi) = parse_scale(v).ok()?;
                 self.cfg.scale = if lo == 1.0 && hi == 1.0 { None } else { Some((lo, hi)) };
@@ -444,6 +447,9 @@ impl RunOptions<'_> {
             }
             let augmentation = matches!(key.as_str(), "scale" | "jitter" | "rotate");
             let given = if key == "rotate" { a.switch(opt) } else { a.value(opt).is_some() };
+            if given && key == "epochs" {
+                continue; // a resume may train on to another epoch count
+            }
             if given || (augmentation && no_augment) {
                 let opt = if given { opt } else { "--no-augment" };
                 if key == "lr" {
@@ -467,35 +473,27 @@ impl RunOptions<'_> {
     }
 }
 
-/// A fingerprint of the samples a run reads (names, points, candidates and labels, in
-/// name order; the features are computed from the first two): FNV-1a 64 in hex, after
-/// the sample count.
+/// A fingerprint of the samples a run reads (every field: name, points, mesh vertex
+/// count, ground-truth faces, candidates, features, labels; in name order): FNV-1a 64
+/// in hex, after the sample count.
 fn data_fingerprint<'a>(samples: impl Iterator<Item = &'a Sample>) -> String {
     let mut v: Vec<&Sample> = samples.collect();
     v.sort_by(|x, y| x.name.cmp(&y.name));
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |bytes: &[u8]| {
-        for &b in bytes {
-            h = (h ^ b as u64).wrapping_mul(0x100_0000_01b3);
-        }
-    };
+    let mut h = Fnv1a::new();
     for s in &v {
-        eat(s.name.as_bytes());
-        eat(&(s.points.len() as u64).to_le_bytes());
-        for p in &s.points {
-            for c in p {
-                eat(&c.to_bits().to_le_bytes());
-            }
-        }
-        eat(&(s.candidates.len() as u64).to_le_bytes());
-        for q in &s.candidates {
-            for i in q {
-                eat(&i.to_le_bytes());
-            }
-        }
-        eat(&s.labels);
+        h.write(s.name.as_bytes());
+        h.write(&(s.points.len() as u64).to_le_bytes());
+        h.write(bytemuck::cast_slice(&s.points));
+        h.write(&s.n_mesh_vertices.to_le_bytes());
+        h.write(&(s.gt_faces.len() as u64).to_le_bytes());
+        h.write(bytemuck::cast_slice(&s.gt_faces));
+        h.write(&(s.candidates.len() as u64).to_le_bytes());
+        h.write(bytemuck::cast_slice(&s.candidates));
+        h.write(&s.feature_dim.to_le_bytes());
+        h.write(bytemuck::cast_slice(&s.features));
+        h.write(&s.labels);
     }
-    format!("{} samples, {h:016x}", v.len())
+    format!("{} samples, {:016x}", v.len(), h.finish())
 }
 
 pub fn run(argv: &[String]) -> Result<()> {
@@ -538,6 +536,11 @@ pub fn run(argv: &[String]) -> Result<()> {
         return Err(Error::Usage(
             "train: --sign-free-normals cannot be combined with --init or --resume (the weights file holds its config)"
                 .into(),
+        ));
+    }
+    if a.value("--resume").is_some() && a.value("--config").is_some() {
+        return Err(Error::Usage(
+            "train: --config cannot be combined with --resume (the checkpoint holds its config)".into(),
         ));
     }
     if a.value("--init").is_some() && (a.value("--resume").is_some() || a.value("--config").is_some()) {
@@ -627,6 +630,17 @@ pub fn run(argv: &[String]) -> Result<()> {
 
     let t0 = std::time::Instant::now();
     let (samples, names) = load_dir(cmd, &data, |s| all_draws || noise_variant(&s.name).1 == 1)?;
+    // Before the hold-out names are checked: other data fails on this, not on a recorded
+    // name the user never typed.
+    let fingerprint = data_fingerprint(samples.iter());
+    if let (Some(r), Some(was)) = (a.value("--resume"), &resumed_data) {
+        if *was != fingerprint {
+            return Err(Error::Usage(format!(
+                "train: --resume {r}: the samples in {} ({fingerprint}) are not those the run was trained on ({was}); resume on its own data, or start a fine-tune with --init",
+                data.display()
+            )));
+        }
+    }
     split.check_names(cmd, names.iter().map(String::as_str))?;
     if samples.len() < names.len() {
         say!(
@@ -674,15 +688,6 @@ pub fn run(argv: &[String]) -> Result<()> {
         model.config().preset,
         model.param_count()
     );
-    let fingerprint = data_fingerprint(tr.iter().chain(&va));
-    if let (Some(r), Some(was)) = (a.value("--resume"), &resumed_data) {
-        if *was != fingerprint {
-            return Err(Error::Usage(format!(
-                "train: --resume {r}: the samples in {} ({fingerprint}) are not those the run was trained on ({was}); resume on its own data, or start a fine-tune with --init",
-                data.display()
-            )));
-        }
-    }
     let run_record =
         RunOptions { cfg: &mut cfg, split: &mut split, all_draws: &mut all_draws }.record(&fingerprint);
     let start_epoch = resume.as_ref().map(|s| s.epoch as usize).unwrap_or(0);

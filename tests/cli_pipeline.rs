@@ -417,6 +417,25 @@ fn refine_trains_rounds_that_reconstruct_reads() {
     let pm = point2quad::io::mesh_io::read_mesh(Path::new(&mesh)).unwrap();
     let q = pm.to_quads().expect("pure quad");
     validate(&HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).expect("manifold")).expect("valid");
+    // `--features inside` (session 23): its config line; reconstruct reads it, and
+    // with `--rescue-lone` too.
+    let inside = s.p("ri.p2qm");
+    refine_tiny(&data, &model, &inside, "1", &["--features", "inside"]);
+    let mi = point2quad::pipeline::model::Model::load(Path::new(&inside)).unwrap();
+    assert_eq!(mi.config().refine_input, point2quad::pipeline::refine::RefineInput::Inside);
+    for extra in [vec![], vec!["--rescue-lone", "0.3"]] {
+        let args =
+            [&["reconstruct", &cloud, "-o", &mesh, "--model", &inside, "--threshold", "0.2"][..], &extra]
+                .concat();
+        ok(&args);
+        let q = point2quad::io::mesh_io::read_mesh(Path::new(&mesh)).unwrap().to_quads().expect("pure quad");
+        validate(&HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).expect("manifold")).expect("valid");
+    }
+    for v in ["nan", "-0.1", "1.5"] {
+        let err = fails(&["reconstruct", &cloud, "-o", &s.p("never.obj"), "--rescue-lone", v], 2);
+        assert!(err.contains("--rescue-lone"), "{v}: {err}");
+    }
+    assert!(!Path::new(&s.p("never.obj")).exists());
     // Bad options: usage errors naming the option; nothing written.
     let never = s.p("never.p2qm");
     for (opt, val) in [
@@ -440,6 +459,23 @@ fn refine_trains_rounds_that_reconstruct_reads() {
     let err =
         fails(&["refine", "--data", &data, "--model", &model, "--out", &never, "--sides", "direction"], 2);
     assert!(err.contains("--features flow") && err.contains("--sides normals"), "{err}");
+    let err = fails(
+        &[
+            "refine",
+            "--data",
+            &data,
+            "--model",
+            &model,
+            "--out",
+            &never,
+            "--sides",
+            "direction",
+            "--features",
+            "inside",
+        ],
+        2,
+    );
+    assert!(err.contains("--features inside") && err.contains("--sides normals"), "{err}");
     refine_tiny(&data, &model, &base_refined, "1", &["--features", "base", "--sides", "direction"]);
     let err = fails(&["refine", "--data", &data, "--model", &s.p("missing.p2qm"), "--out", &never], 1);
     assert!(err.contains("missing.p2qm"), "{err}");

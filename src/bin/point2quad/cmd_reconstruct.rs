@@ -47,8 +47,9 @@ OPTIONS:
                           are inserted where they glue to the border on 2+ edges [0.1]
     --rescue-lone P       at holes, also rescue a candidate glued to the border on one
                           edge only when one of its corners is a point no face uses
-                          yet and its probability is at least P, 0 <= P <= 1
-                          (session 23 experiment; default: never)
+                          yet and its probability is at least P and at least
+                          --rescue-min-prob, 0 <= P <= 1 (session 23 experiment;
+                          default: never)
     --no-rescue           do not rescue candidates at holes
     --no-close            leave odd loops and loops the hole filling could not close
                           open (default: pair odd loops through the faces between

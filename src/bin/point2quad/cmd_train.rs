@@ -43,14 +43,16 @@ OPTIONS:
                           so that its median nearest-neighbour distance is F cells
                           of the encoder's first level, so every cloud looks equally
                           dense to it (a fresh model only) [off]
-    --epochs N            total epochs, 1..100000 (a resumed run continues up to N) [40]
+    --epochs N            total epochs, 1..100000 (a resumed run continues up to N;
+                          left out, up to the checkpoint's own) [40]
     --resume CKPT         continue exactly from a MODEL.ckpt written earlier: it
-                          records the run's --seed, --lr, --max-candidates, split
-                          (--val-fraction, --hold-out, --fold), --draws and
-                          augmentation, and a fingerprint of its samples; options
-                          left out are read from it, one given with another value
-                          is refused (--lr is taken, with a note), and other data
-                          is refused (--init starts a fine-tune on it)
+                          records the run's --epochs, --seed, --lr,
+                          --max-candidates, split (--val-fraction, --hold-out,
+                          --fold), --draws and augmentation, and a fingerprint of
+                          its samples; options left out are read from it, one
+                          given with another value is refused (--lr is taken, with
+                          a note; --epochs sets a new goal), and other data is
+                          refused (--init starts a fine-tune on it)
     --init WEIGHTS        start from these weights (any weights file: its config is
                           used, refinement rounds are dropped) with a fresh optimiser,
                           learning-rate schedule and epoch count: a fine-tune

@@ -1200,7 +1200,7 @@ fn resume_reads_the_run_from_the_checkpoint() {
         )
     };
     for (extra, names) in [
-        (vec!["--config", "default"], ["--config", "--resume"]),
+        (vec!["--config", "default_kp"], ["--config default_kp", "'default'"]),
         (vec!["--seed", "4"], ["--seed", "seed \"3\""]),
         (vec!["--fold", "0/2"], ["--fold", "fold \"\""]),
         (vec!["--scale", "0.9,1.1"], ["--scale", "\"0.8,1.2\""]),

@@ -540,11 +540,6 @@ pub fn run(argv: &[String]) -> Result<()> {
                 .into(),
         ));
     }
-    if a.value("--resume").is_some() && a.value("--config").is_some() {
-        return Err(Error::Usage(
-            "train: --config cannot be combined with --resume (the checkpoint holds its config)".into(),
-        ));
-    }
     if a.value("--init").is_some() && (a.value("--resume").is_some() || a.value("--config").is_some()) {
         return Err(Error::Usage(
             "train: --init cannot be combined with --resume or --config (the weights file holds its config)"
@@ -593,7 +588,18 @@ pub fn run(argv: &[String]) -> Result<()> {
                 let mut opts = RunOptions { cfg: &mut cfg, split: &mut split, all_draws: &mut all_draws };
                 resumed_data = opts.adopt(&a, r, &state.run)?;
             }
-            (Model::from_checkpoint(&ck, Path::new(r))?, Some(state))
+            let m = Model::from_checkpoint(&ck, Path::new(r))?;
+            // The checkpoint holds its config: a --config naming another preset would be
+            // silently ignored.
+            if let Some(c) = a.value("--config") {
+                if c != m.config().preset {
+                    return Err(Error::Usage(format!(
+                        "train: --config {c} with --resume {r}: the checkpoint holds a '{}' model (leave --config out)",
+                        m.config().preset
+                    )));
+                }
+            }
+            (m, Some(state))
         }
         None => match a.value("--init") {
             Some(w) => {

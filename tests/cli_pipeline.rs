@@ -435,6 +435,10 @@ fn refine_trains_rounds_that_reconstruct_reads() {
         let err = fails(&["reconstruct", &cloud, "-o", &s.p("never.obj"), "--rescue-lone", v], 2);
         assert!(err.contains("--rescue-lone"), "{v}: {err}");
     }
+    for opt in ["--rescue-lone", "--rescue-min-prob"] {
+        let err = fails(&["reconstruct", &cloud, "-o", &s.p("never.obj"), opt, "0.3", "--no-rescue"], 2);
+        assert!(err.contains(opt) && err.contains("--no-rescue"), "{err}");
+    }
     assert!(!Path::new(&s.p("never.obj")).exists());
     // Bad options: usage errors naming the option; nothing written.
     let never = s.p("never.p2qm");

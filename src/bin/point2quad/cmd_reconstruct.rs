@@ -161,6 +161,14 @@ pub fn run(argv: &[String]) -> Result<()> {
     pp.rescue.min_prob =
         a.parsed_in(cmd, "--rescue-min-prob", pp.rescue.min_prob, 0.0, 1.0, "it is a probability")?;
     pp.rescue.enabled = !a.switch("--no-rescue");
+    // Settings of a step that is turned off would be ignored without a word.
+    for opt in ["--rescue-min-prob", "--rescue-lone"] {
+        if !pp.rescue.enabled && a.value(opt).is_some() {
+            return Err(Error::Usage(format!(
+                "{cmd}: {opt} has no effect with --no-rescue; give one of them"
+            )));
+        }
+    }
     if a.value("--rescue-lone").is_some() {
         pp.rescue.lone_min_prob =
             Some(a.parsed_in(cmd, "--rescue-lone", 0.5f32, 0.0, 1.0, "it is a probability")?);

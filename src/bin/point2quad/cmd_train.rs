@@ -430,7 +430,8 @@ impl RunOptions<'_> {
     /// Continues the run recorded in `record` (read from checkpoint `ckpt`): each option
     /// the command line leaves out takes the recorded value; one given with another
     /// value is a usage error, except `--lr` (taken, with a note: the schedule is
-    /// recomputed from it). Returns the recorded data fingerprint.
+    /// recomputed from it) and `--epochs` (a new goal). Returns the recorded data
+    /// fingerprint.
     fn adopt(&mut self, a: &Args, ckpt: &str, record: &[(String, String)]) -> Result<Option<String>> {
         let no_augment = a.switch("--no-augment");
         let mut data = None;

@@ -941,40 +941,81 @@ struct Pre {
     base: f32,
 }
 
-/// How many of the proposer's other neighbours (`rel`, relative positions) lie in
-/// the quad: within `inside_plane_tol · L̄` of its plane and no farther than
-/// `inside_margin · L̄` outside any edge line (L̄ = mean edge length).
-fn inside_count(c: &Pre, rel: &[[f32; 3]], cfg: &CandidateConfig) -> u16 {
-    let q3 = &c.q3;
-    let lbar = (c.len[0] + c.len[1] + c.len[2] + c.len[3]) / 4.0;
-    let centre = [
-        (q3[0][0] + q3[1][0] + q3[2][0] + q3[3][0]) / 4.0,
-        (q3[0][1] + q3[1][1] + q3[2][1] + q3[3][1]) / 4.0,
-        (q3[0][2] + q3[1][2] + q3[2][2] + q3[3][2]) / 4.0,
-    ];
-    let tol_plane = cfg.inside_plane_tol * lbar;
-    let margin = cfg.inside_margin * lbar;
-    // Edge-line normals in the plane: inward for a counter-clockwise quad.
-    let mut en = [[0.0f32; 3]; 4];
-    for e in 0..4 {
-        let d = sub(q3[(e + 1) % 4], q3[e]);
-        let m = cross(c.normal, d);
-        en[e] = [m[0] / c.len[e], m[1] / c.len[e], m[2] / c.len[e]];
+/// The ranking's inside test of one quad: a point lies in it when it is within
+/// `plane_tol · L̄` of the plane through its centre normal to `normal`, and no farther
+/// than `margin · L̄` outside any of its edge lines (L̄ = mean edge length). Shared by the
+/// ranking ([`inside_count`]) and the refinement's `inside_points`.
+pub(crate) struct InsideTest {
+    corners: [[f32; 3]; 4],
+    centre: [f32; 3],
+    normal: [f32; 3],
+    /// Edge-line normals in the plane: inward for a counter-clockwise quad.
+    en: [[f32; 3]; 4],
+    tol_plane: f32,
+    margin: f32,
+}
+
+impl InsideTest {
+    /// The test of the quad with `corners` (cyclic, counter-clockwise about `normal`,
+    /// a unit vector) and edge lengths `len` (edge e runs from corner e to e + 1; each
+    /// must be non-zero).
+    pub(crate) fn new(
+        corners: [[f32; 3]; 4],
+        normal: [f32; 3],
+        len: [f32; 4],
+        plane_tol: f32,
+        margin: f32,
+    ) -> InsideTest {
+        let q3 = &corners;
+        let lbar = (len[0] + len[1] + len[2] + len[3]) / 4.0;
+        let centre = [
+            (q3[0][0] + q3[1][0] + q3[2][0] + q3[3][0]) / 4.0,
+            (q3[0][1] + q3[1][1] + q3[2][1] + q3[3][1]) / 4.0,
+            (q3[0][2] + q3[1][2] + q3[2][2] + q3[3][2]) / 4.0,
+        ];
+        let mut en = [[0.0f32; 3]; 4];
+        for e in 0..4 {
+            let d = sub(q3[(e + 1) % 4], q3[e]);
+            let m = cross(normal, d);
+            en[e] = [m[0] / len[e], m[1] / len[e], m[2] / len[e]];
+        }
+        InsideTest { corners, centre, normal, en, tol_plane: plane_tol * lbar, margin: margin * lbar }
     }
-    // Branch-free over all neighbours (it vectorises), then the quad's own three
-    // corners, which the count excludes, taken back out with the same test.
-    let passes = |r: &[f32; 3]| {
-        let off_plane = dot(sub(*r, centre), c.normal).abs() > tol_plane;
+
+    /// Whether `r` lies in the quad. Branch-free (it vectorises over a neighbourhood).
+    #[inline]
+    pub(crate) fn holds(&self, r: &[f32; 3]) -> bool {
+        let (q3, en, margin) = (&self.corners, &self.en, self.margin);
+        let off_plane = dot(sub(*r, self.centre), self.normal).abs() > self.tol_plane;
         let within = (dot(en[0], sub(*r, q3[0])) >= -margin)
             & (dot(en[1], sub(*r, q3[1])) >= -margin)
             & (dot(en[2], sub(*r, q3[2])) >= -margin)
             & (dot(en[3], sub(*r, q3[3])) >= -margin);
         !off_plane & within
-    };
-    let mut inside: u32 = rel.iter().map(|r| u32::from(passes(r))).sum();
+    }
+
+    /// The centre of the quad's corners.
+    pub(crate) fn centre(&self) -> [f32; 3] {
+        self.centre
+    }
+
+    /// `plane_tol · L̄` and `margin · L̄`.
+    pub(crate) fn bounds(&self) -> (f32, f32) {
+        (self.tol_plane, self.margin)
+    }
+}
+
+/// How many of the proposer's other neighbours (`rel`, relative positions) lie in
+/// the quad: within `inside_plane_tol · L̄` of its plane and no farther than
+/// `inside_margin · L̄` outside any edge line (L̄ = mean edge length).
+fn inside_count(c: &Pre, rel: &[[f32; 3]], cfg: &CandidateConfig) -> u16 {
+    let test = InsideTest::new(c.q3, c.normal, c.len, cfg.inside_plane_tol, cfg.inside_margin);
+    // Over all neighbours, then the quad's own three corners, which the count excludes,
+    // taken back out with the same test.
+    let mut inside: u32 = rel.iter().map(|r| u32::from(test.holds(r))).sum();
     for &l in &c.local {
         if let Some(r) = l.checked_sub(1).and_then(|i| rel.get(i)) {
-            inside = inside.saturating_sub(u32::from(passes(r)));
+            inside = inside.saturating_sub(u32::from(test.holds(r)));
         }
     }
     inside.min(u32::from(u16::MAX)) as u16

@@ -30,7 +30,7 @@ use crate::nn::conv1d::Conv1d;
 use crate::nn::loss::weighted_cross_entropy;
 use crate::nn::module::Module;
 use crate::nn::optim::{ExpDecay, Sgd, SgdConfig};
-use crate::pipeline::candidates::{canonical, dot as dot3, norm as norm3, sub as sub3};
+use crate::pipeline::candidates::{canonical, dot as dot3, norm as norm3, sub as sub3, InsideTest};
 use crate::rng::Rng;
 use crate::tensor::{Grads, Graph, ParamId, ParamKind, ParamStore, Tensor, Var};
 use crate::{Error, Result};
@@ -644,7 +644,7 @@ pub fn refine_features_with(
 }
 
 /// Per candidate, the points other than its corners that lie in it by the candidate
-/// ranking's inside test: within `plane_tol · L̄` of the plane through its centre normal
+/// ranking's inside test (`candidates::InsideTest`): within `plane_tol · L̄` of the plane through its centre normal
 /// to [`quad_normal`], and no farther than `margin · L̄` outside any of its edge lines
 /// (L̄ its mean edge length). As (starts, one more than the candidates; points, each
 /// candidate's ascending). A candidate with a zero-length edge or a zero normal has
@@ -671,14 +671,8 @@ pub fn inside_points(
             let n = quad_normal(points, q);
             let len = [0, 1, 2, 3].map(|e| norm3(sub3(p[(e + 1) % 4], p[e])));
             if n != [0.0; 3] && len.iter().all(|&l| l > 0.0 && l.is_finite()) {
-                let lbar = (len[0] + len[1] + len[2] + len[3]) / 4.0;
-                let centre = [0, 1, 2].map(|k| (p[0][k] + p[1][k] + p[2][k] + p[3][k]) / 4.0);
-                let (tol, m) = (plane_tol * lbar, margin * lbar);
-                // Inward edge-line normals (the quad runs counter-clockwise about n).
-                let en = [0, 1, 2, 3].map(|e| {
-                    let w = crate::pipeline::candidates::cross(n, sub3(p[(e + 1) % 4], p[e]));
-                    w.map(|x| x / len[e])
-                });
+                let test = InsideTest::new(p, n, len, plane_tol, margin);
+                let (centre, (tol, m)) = (test.centre(), test.bounds());
                 // A search radius that holds every passing point: a corner of the quad
                 // widened by the margin lies within m / sin(half its angle) of the
                 // corner (angles in the plane normal to n).
@@ -701,9 +695,7 @@ pub fn inside_points(
                     if q.contains(&v) {
                         continue;
                     }
-                    let r = points[v as usize];
-                    let on_plane = dot3(sub3(r, centre), n).abs() <= tol;
-                    if on_plane && (0..4).all(|e| dot3(en[e], sub3(r, p[e])) >= -m) {
+                    if test.holds(&points[v as usize]) {
                         members.push(v);
                     }
                 }

@@ -291,8 +291,9 @@ pub(crate) fn load_dir(
     Ok((samples, seen.into_keys().collect()))
 }
 
-/// Parses `--scale MIN,MAX`: two finite numbers with 0 < MIN <= MAX.
-fn parse_scale(v: &str) -> Result<(f32, f32)> {
+/// Parses `--scale MIN,MAX`: two finite numbers with 0 < MIN <= MAX; as
+/// `TrainConfig::scale` holds it (`None` for 1,1: no scaling).
+fn parse_scale(v: &str) -> Result<Option<(f32, f32)>> {
     let bad =
         |why: &str| Error::Usage(format!("train: --scale {v:?}: {why} (see `point2quad train --help`)"));
     let (lo, hi) = v.split_once(',').ok_or_else(|| bad("expected MIN,MAX, e.g. 0.9,1.1"))?;
@@ -307,7 +308,7 @@ fn parse_scale(v: &str) -> Result<(f32, f32)> {
     if lo > hi {
         return Err(bad("MIN must not exceed MAX"));
     }
-    Ok((lo, hi))
+    Ok(if lo == 1.0 && hi == 1.0 { None } else { Some((lo, hi)) })
 }
 
 /// The augmentation options into `cfg` (defaults: `TrainConfig`'s).
@@ -326,8 +327,7 @@ fn augmentation(a: &Args, cfg: &mut TrainConfig) -> Result<()> {
     }
     cfg.rotate = !a.switch("--no-rotate");
     if let Some(v) = a.value("--scale") {
-        let (lo, hi) = parse_scale(v)?;
-        cfg.scale = if lo == 1.0 && hi == 1.0 { None } else { Some((lo, hi)) };
+        cfg.scale = parse_scale(v)?;
     }
     // `parsed_in` refuses NaN too.
     cfg.jitter =
@@ -402,10 +402,7 @@ impl RunOptions<'_> {
             }
             "fold" => self.split.fold = if v.is_empty() { None } else { Some(parse_fold(v)?) },
             "draws" => *self.all_draws = parse_draws(v)?,
-            "scale" => {
-                let (lo, hi) = parse_scale(v).ok()?;
-                self.cfg.scale = if lo == 1.0 && hi == 1.0 { None } else { Some((lo, hi)) };
-            }
+            "scale" => self.cfg.scale = parse_scale(v).ok()?,
             "jitter" => self.cfg.jitter = v.parse().ok().filter(|j| (0.0..=1.0).contains(j))?,
             "rotate" => {
                 self.cfg.rotate = match v {

@@ -500,7 +500,7 @@ pub fn postprocess_with_reserve(
                 all_p.push(p);
             }
         }
-        report.rescued = rescue_faces(&mut mesh, &all, &all_p, &pool, &cfg.rescue).len();
+        report.rescued = rescue_faces(&mut mesh, &pos, &all, &all_p, &pool, &cfg.rescue).len();
     }
     report.close = close_holes(&mut mesh, &pos, &cfg.close);
     if cfg.fill_holes && (report.rescued > 0 || report.close.quads_added > 0) {

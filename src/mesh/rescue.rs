@@ -19,6 +19,8 @@ use std::collections::HashMap;
 
 use super::halfedge::HalfedgeMesh;
 use super::handles::{FaceId, VertexId};
+use super::hole_fill::quad_normal;
+use crate::math::dot;
 
 /// Settings of the rescue of candidates at holes.
 #[derive(Clone, Debug, PartialEq)]
@@ -36,11 +38,23 @@ pub struct RescueConfig {
     /// A candidate glued on a single edge is rescued too when a corner of it is a
     /// vertex without faces and its probability is at least this (`None`: never).
     pub lone_min_prob: Option<f32>,
+    /// A candidate is refused when, oriented to agree with a face it glues to, its
+    /// normal and that face's are further apart than this dot product allows (session
+    /// 24: a quad glued on two border edges of a flat patch could lie folded back over
+    /// the patch's own faces). The hole filling and the closing use the same bound.
+    pub min_normal_dot: f64,
 }
 
 impl Default for RescueConfig {
     fn default() -> Self {
-        RescueConfig { enabled: true, min_prob: 0.1, min_glued: 2, max_passes: 16, lone_min_prob: None }
+        RescueConfig {
+            enabled: true,
+            min_prob: 0.1,
+            min_glued: 2,
+            max_passes: 16,
+            lone_min_prob: None,
+            min_normal_dot: -0.3,
+        }
     }
 }
 
@@ -71,13 +85,16 @@ pub fn remove_small_open_components(mesh: &mut HalfedgeMesh, max_faces: usize) -
 
 /// Inserts candidates from `pool` (indices into `faces`/`probs`) at the mesh's holes, as
 /// the module documentation says. Candidates below `cfg.min_prob`, or already in the mesh,
-/// are ignored. Returns the indices inserted, in insertion order.
+/// are ignored, and so is one that would fold over a face it glues to (`pos`: the
+/// vertices' positions; `cfg.min_normal_dot`). Returns the indices inserted, in
+/// insertion order.
 ///
 /// # Panics
 /// If an index of `pool` is out of range of `faces` or `probs`, or a face's vertex is not
-/// a vertex of `mesh`.
+/// a vertex of `mesh` or has no position in `pos`.
 pub fn rescue_faces(
     mesh: &mut HalfedgeMesh,
+    pos: &[[f64; 3]],
     faces: &[[u32; 4]],
     probs: &[f32],
     pool: &[usize],
@@ -104,13 +121,17 @@ pub fn rescue_faces(
     }
     let mut used = vec![false; faces.len()];
     let mut stamp = vec![0u32; faces.len()];
+    let normal_of = |q: [VertexId; 4]| quad_normal(&q.map(|v| pos[v.idx()]));
     // Boundary edges of the quad: how many of its edges exist with one face; `None` when
-    // an edge already has two faces (it cannot go in) or when two of those edges belong
+    // an edge already has two faces (it cannot go in), when two of those edges belong
     // to one face (the quad would share three corners with it and fold over it, at a
-    // convex corner of a border).
+    // convex corner of a border), or when the quad, turned to agree with a face across
+    // one of them, faces away from it by more than `min_normal_dot` allows (folded back
+    // over it) or has no normal.
     let glued = |mesh: &HalfedgeMesh, f: &[u32; 4]| -> Option<usize> {
         let mut across: [Option<FaceId>; 4] = [None; 4];
         let mut g = 0;
+        let n = normal_of(f.map(VertexId));
         for i in 0..4 {
             let (a, b) = (VertexId(f[i]), VertexId(f[(i + 1) % 4]));
             if let Some(h) = mesh.find_halfedge(a, b) {
@@ -120,6 +141,14 @@ pub fn rescue_faces(
                 let nb = mesh.face(h).or(mesh.face(h.opposite()));
                 if across[..g].contains(&nb) {
                     return None;
+                }
+                if let Some(face) = nb {
+                    // The face runs a → b when it owns h: then the quad goes in reversed.
+                    let sign = if mesh.face(h).is_some() { -1.0 } else { 1.0 };
+                    let m = normal_of(mesh.face_vertices(face))?;
+                    if sign * dot(n?, m) < cfg.min_normal_dot {
+                        return None;
+                    }
                 }
                 across[g] = nb;
                 g += 1;
@@ -214,7 +243,7 @@ mod tests {
         let mut probs = vec![0.3; hole.len()];
         probs.push(0.2);
         let pool: Vec<usize> = (0..pool_faces.len()).collect();
-        let got = rescue_faces(&mut mesh, &pool_faces, &probs, &pool, &RescueConfig::default());
+        let got = rescue_faces(&mut mesh, &p, &pool_faces, &probs, &pool, &RescueConfig::default());
         validate(&mesh).unwrap();
         assert!(mesh.is_closed() || mesh.boundary_loops().len() == 1, "only the outer border is left");
         assert_eq!(mesh.n_faces(), 25);
@@ -226,21 +255,60 @@ mod tests {
     fn nothing_grows_outward_and_low_probabilities_are_ignored() {
         let (p, q) = grid(3);
         let mut mesh = HalfedgeMesh::from_quads(p.len() + 20, &q).unwrap();
+        // The 20 extra vertices lie beyond the grid's x = 0 side, out of its plane.
+        let p: Vec<[f64; 3]> =
+            p.iter().copied().chain((0..20).map(|i| [-1.0 - i as f64, 0.5 * i as f64, 1.0])).collect();
         let before = mesh.clone();
         // A quad glued to the outer border along one edge only (it would extend the border)
         // and an inner face below min_prob.
         let faces = vec![[1, 0, 16, 17], [0, 1, 5, 4]];
-        let got = rescue_faces(&mut mesh, &faces, &[0.9, 0.9], &[0], &RescueConfig::default());
+        let got = rescue_faces(&mut mesh, &p, &faces, &[0.9, 0.9], &[0], &RescueConfig::default());
         assert!(got.is_empty());
         assert_eq!(mesh, before);
         let (p, q) = grid(3);
         let mut mesh = HalfedgeMesh::from_quads(p.len(), &q[1..]).unwrap();
         let cfg = RescueConfig::default();
-        assert!(rescue_faces(&mut mesh, &q, &[0.01; 9], &[0], &cfg).is_empty());
-        assert_eq!(rescue_faces(&mut mesh, &q, &[0.5; 9], &[0], &cfg), vec![0]);
+        assert!(rescue_faces(&mut mesh, &p, &q, &[0.01; 9], &[0], &cfg).is_empty());
+        assert_eq!(rescue_faces(&mut mesh, &p, &q, &[0.5; 9], &[0], &cfg), vec![0]);
         let off = RescueConfig { enabled: false, ..cfg };
         let mut m2 = HalfedgeMesh::from_quads(p.len(), &q[1..]).unwrap();
-        assert!(rescue_faces(&mut m2, &q, &[0.5; 9], &[0], &off).is_empty());
+        assert!(rescue_faces(&mut m2, &p, &q, &[0.5; 9], &[0], &off).is_empty());
+    }
+
+    /// Session 24 (an audit's find): a flat 2 × 2 patch of a 3 × 3 point grid, and the
+    /// two 1 × 2 rectangles over it, each glued to the patch's border on two edges of
+    /// different faces (bottom and top). Turned to agree with those faces they face
+    /// the other way: folded back over the patch, so neither goes in, in any pose; with
+    /// the normal bound off (−∞) one does, as before the guard (the audit's cloud got
+    /// both, through the border the first left).
+    #[test]
+    fn quads_folded_back_over_the_faces_they_glue_to_stay_out() {
+        let (p, q) = grid(2);
+        let folds = vec![[0, 6, 7, 1], [1, 7, 8, 2]];
+        let mut rng = crate::rng::Rng::new(24);
+        for pose in 0..8 {
+            let r = rng.rotation();
+            let s = 10f64.powi(pose - 4);
+            let pp: Vec<[f64; 3]> = p
+                .iter()
+                .map(|v| {
+                    let w = crate::math::mat_vec(&r, *v);
+                    [s * w[0] + 3.0, s * w[1] - 7.0, s * w[2]]
+                })
+                .collect();
+            let mut mesh = HalfedgeMesh::from_quads(p.len(), &q).unwrap();
+            let before = mesh.clone();
+            let got = rescue_faces(&mut mesh, &pp, &folds, &[0.9, 0.9], &[0, 1], &RescueConfig::default());
+            assert!(got.is_empty(), "pose {pose}: {got:?} folded back in");
+            assert_eq!(mesh, before);
+            let off = RescueConfig { min_normal_dot: f64::NEG_INFINITY, ..RescueConfig::default() };
+            let got = rescue_faces(&mut mesh, &pp, &folds, &[0.9, 0.9], &[0, 1], &off);
+            assert!(!got.is_empty(), "pose {pose}: without the bound a fold glues on");
+            validate(&mesh).unwrap();
+        }
+        // A true face of a hole in the same patch still goes in, in that pose too.
+        let mut mesh = HalfedgeMesh::from_quads(p.len(), &q[1..]).unwrap();
+        assert_eq!(rescue_faces(&mut mesh, &p, &q, &[0.5; 4], &[0], &RescueConfig::default()), vec![0]);
     }
 
     /// Session 23's `lone_min_prob`: a 3 × 3 hole whose pool holds only the middle face of
@@ -258,12 +326,12 @@ mod tests {
         let fresh = || HalfedgeMesh::from_quads(p.len(), &keep).unwrap();
         let probs = [0.35f32; 4];
         let mut mesh = fresh();
-        assert!(rescue_faces(&mut mesh, &sides, &probs, &pool, &RescueConfig::default()).is_empty());
+        assert!(rescue_faces(&mut mesh, &p, &sides, &probs, &pool, &RescueConfig::default()).is_empty());
         let above = RescueConfig { lone_min_prob: Some(0.4), ..RescueConfig::default() };
-        assert!(rescue_faces(&mut mesh, &sides, &probs, &pool, &above).is_empty());
+        assert!(rescue_faces(&mut mesh, &p, &sides, &probs, &pool, &above).is_empty());
         assert_eq!(mesh, fresh());
         let lone = RescueConfig { lone_min_prob: Some(0.3), ..RescueConfig::default() };
-        let got = rescue_faces(&mut mesh, &sides, &probs, &pool, &lone);
+        let got = rescue_faces(&mut mesh, &p, &sides, &probs, &pool, &lone);
         validate(&mesh).unwrap();
         assert_eq!(got, vec![0, 3]);
         assert_eq!(mesh.n_faces(), keep.len() + 2);

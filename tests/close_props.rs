@@ -207,9 +207,15 @@ proptest! {
         let mut pool_faces = Vec::new();
         let mut probs = Vec::new();
         let mut open = Vec::new();
+        // The extra vertices sit on the corners they replace, so the wrong quads lie
+        // flat over their holes, facing as the mesh does (not folded over it).
+        let mut pos = g.vertices.clone();
+        pos.resize(nv + 2 * n * n, [0.0; 3]);
         for f in (0..n * n).filter(|&f| removed[f]) {
             let (i, j) = (f % n, f / n);
             let (x, y) = ((nv + 2 * f) as u32, (nv + 2 * f + 1) as u32);
+            pos[x as usize] = g.vertices[id(i, j) as usize];
+            pos[y as usize] = g.vertices[id(i + 1, j + 1) as usize];
             pool_faces.push(g.quads[f]);
             if f != 0 && rng.uniform(0.0, 1.0) < 0.2 {
                 // Offered only below min_prob: this hole stays open.
@@ -229,7 +235,7 @@ proptest! {
         let border0 = boundary_edges(&mesh);
         let pool: Vec<usize> = (0..pool_faces.len()).collect();
         let cfg = RescueConfig::default();
-        let got = rescue_faces(&mut mesh, &pool_faces, &probs, &pool, &cfg);
+        let got = rescue_faces(&mut mesh, &pos, &pool_faces, &probs, &pool, &cfg);
         validate(&mesh).unwrap();
         prop_assert!(boundary_edges(&mesh) <= border0);
         prop_assert!(got.iter().all(|&c| probs[c] >= cfg.min_prob));

@@ -90,12 +90,15 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
     let mut points = Vec::with_capacity(bytes.len() / 24);
     let mut declared: Option<(usize, usize)> = None;
     let mut first = true;
+    // Columns of x, y and z: the first three, or those a header names so.
+    let mut columns = [0usize, 1, 2];
     for (ln, raw) in Lines::new(bytes) {
         let mut toks = Tokens::with_commas(raw);
         let Some(t0) = toks.next() else { continue };
         if first {
             first = false;
             if is_column_header(raw) {
+                columns = header_columns(raw).map_err(|m| Error::parse(name, ln, m))?;
                 continue;
             }
             if toks.clone().next().is_none() {
@@ -128,12 +131,30 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
             ));
         }
         let mut p = [0.0; 3];
-        p[0] = coord(t0, name, ln, &format_args!("point {i}"))?;
-        for (axis, c) in p.iter_mut().enumerate().skip(1) {
-            let tok = toks.next().ok_or_else(|| {
-                Error::parse(name, ln, format!("point {i}: needs 3 coordinates, found {axis}"))
-            })?;
-            *c = coord(tok, name, ln, &format_args!("point {i}"))?;
+        if columns == [0, 1, 2] {
+            p[0] = coord(t0, name, ln, &format_args!("point {i}"))?;
+            for (axis, c) in p.iter_mut().enumerate().skip(1) {
+                let tok = toks.next().ok_or_else(|| {
+                    Error::parse(name, ln, format!("point {i}: needs 3 coordinates, found {axis}"))
+                })?;
+                *c = coord(tok, name, ln, &format_args!("point {i}"))?;
+            }
+        } else {
+            let row: Vec<&[u8]> = std::iter::once(t0).chain(toks).collect();
+            for (c, &col) in p.iter_mut().zip(&columns) {
+                let tok = row.get(col).ok_or_else(|| {
+                    Error::parse(
+                        name,
+                        ln,
+                        format!(
+                            "point {i}: the header puts a coordinate in column {}, the line has {}",
+                            col + 1,
+                            row.len()
+                        ),
+                    )
+                })?;
+                *c = coord(tok, name, ln, &format_args!("point {i}"))?;
+            }
         }
         points.push(p);
     }
@@ -169,7 +190,28 @@ fn decimal_comma_line(line: &[u8]) -> Option<&[u8]> {
     let mixed = data.split(|&b| b == b',').take(3).any(|f| trim_space(f).iter().any(|&b| text::is_space(b)));
     let first = data.split(|&b| b == b',').next().unwrap_or_default();
     let coords_before_commas = first.split(|&b| text::is_space(b)).filter(|t| !t.is_empty()).count() >= 3;
-    (mixed && !coords_before_commas).then(|| trim_space(data))
+    // `0 0 0,5`: whitespace separates the columns and one of the first three values holds
+    // a comma between digits, while no value starts or ends with a comma (so commas are
+    // not separators here, as in `1, 2, 3`). Read with commas as separators it gives the
+    // point (0, 0, 0) and an ignored 5, silently.
+    let words: Vec<&[u8]> = data.split(|&b| text::is_space(b)).filter(|t| !t.is_empty()).collect();
+    // Each of the first three words must read as a number once its comma is a point
+    // (`1,2,3,a b` is a CSV row with a spaced fourth field, not decimals).
+    let as_decimal = |w: &&[u8]| {
+        let commas = w.iter().filter(|&&b| b == b',').count();
+        let dotted: Vec<u8> = w.iter().map(|&b| if b == b',' { b'.' } else { b }).collect();
+        commas <= 1
+            && !dotted.contains(&b'e')
+            && !dotted.contains(&b'E')
+            && text::parse_f64(&dotted).is_some()
+    };
+    let decimal_word =
+        |w: &&[u8]| w.windows(3).any(|t| t[0].is_ascii_digit() && t[1] == b',' && t[2].is_ascii_digit());
+    let glued_commas = words.len() >= 3
+        && words.iter().all(|w| w.first() != Some(&b',') && w.last() != Some(&b','))
+        && words.iter().take(3).all(as_decimal)
+        && words.iter().take(3).any(decimal_word);
+    ((mixed && !coords_before_commas) || glued_commas).then(|| trim_space(data))
 }
 
 /// `f` without leading and trailing whitespace.
@@ -177,6 +219,45 @@ fn trim_space(f: &[u8]) -> &[u8] {
     let start = f.iter().position(|&b| !text::is_space(b)).unwrap_or(f.len());
     let end = f.iter().rposition(|&b| !text::is_space(b)).map_or(start, |e| e + 1);
     &f[start..end]
+}
+
+/// Where a header row (see [`is_column_header`]) puts x, y and z: the columns named
+/// `x`, `y` and `z` (case-insensitive, quotes dropped) wherever they are, so `id,x,y,z`
+/// and `z,y,x` read right; the first three columns when it names none of them
+/// (`_x, pos_y, z1`). A header that names some but not all three is refused (the
+/// message), as is one that names one twice.
+fn header_columns(line: &[u8]) -> std::result::Result<[usize; 3], String> {
+    let mut found: [Option<usize>; 3] = [None; 3];
+    let names: Vec<String> = Tokens::with_commas(line)
+        .map(|tok| {
+            let tok = match tok {
+                [b'"', inner @ .., b'"'] => inner,
+                _ => tok,
+            };
+            String::from_utf8_lossy(tok).to_ascii_lowercase()
+        })
+        .collect();
+    for (col, n) in names.iter().enumerate() {
+        if let Some(axis) = ["x", "y", "z"].iter().position(|a| a == n) {
+            if found[axis].is_some() {
+                return Err(format!("the header names column '{n}' twice"));
+            }
+            found[axis] = Some(col);
+        }
+    }
+    match found {
+        [Some(x), Some(y), Some(z)] => Ok([x, y, z]),
+        [None, None, None] => Ok([0, 1, 2]),
+        _ => {
+            let missing: Vec<&str> =
+                ["x", "y", "z"].iter().zip(&found).filter(|(_, f)| f.is_none()).map(|(a, _)| *a).collect();
+            Err(format!(
+                "the header names some coordinate columns but not {}; name the three columns x, y and z, \
+                 or give no header (the first three columns are then x, y, z)",
+                missing.join(" or ")
+            ))
+        }
+    }
 }
 
 /// A line of at least 3 column names, `x,y,z`, `"x","y","z"` or `X Y Z nx ny nz`: every
@@ -260,6 +341,11 @@ mod tests {
         let p = parse_points(src, PointFormat::Xyz, "t.xyz").unwrap();
         assert_eq!(p, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0], [-0.0, 1e-3, 0.5]]);
         assert!(p[3][0].is_sign_negative());
+        // Commas as separators, however spaced, and a comma in a column after the third,
+        // are not decimal commas.
+        let src = b"1, 2,3\n1.0, 2.0, 3.0\n1 2 3 0.5,0.2\n1 ,2 ,3\n1,2,3,a b\n1,2,3,a b c\n";
+        let p = parse_points(src, PointFormat::Xyz, "t.xyz").unwrap();
+        assert_eq!(p, vec![[1.0, 2.0, 3.0]; 6]);
     }
 
     /// Regression: a CR-only .xyz file read as one line with extra columns: one point
@@ -283,6 +369,27 @@ mod tests {
         ] {
             let got = parse_points(src, PointFormat::Xyz, "t.csv");
             assert_eq!(got.unwrap(), want, "{}", String::from_utf8_lossy(src));
+        }
+        // Named columns are read by name (session 24's audit: `id,x,y,z` read the ids as
+        // x and dropped z; `z,y,x` swapped x and z).
+        for src in [
+            &b"id,x,y,z\n0,1,2,3\n1,4,5,6\n"[..],
+            b"z,y,x\n3,2,1\n6,5,4\n",
+            b"\"Z\" \"nx\" \"X\" \"Y\"\n3 0 1 2\n6 0 4 5\n",
+        ] {
+            let got = parse_points(src, PointFormat::Xyz, "t.csv");
+            assert_eq!(got.unwrap(), want, "{}", String::from_utf8_lossy(src));
+        }
+        for (src, want) in [
+            (&b"x,y,height\n1,2,3\n"[..], "t.csv:1: the header names some coordinate columns but not z"),
+            (b"x,x,y,z\n1,2,3,4\n", "t.csv:1: the header names column 'x' twice"),
+            (
+                b"id,x,y,z\n1,2,3\n",
+                "t.csv:2: point 0: the header puts a coordinate in column 4, the line has 3",
+            ),
+        ] {
+            let e = parse_points(src, PointFormat::Xyz, "t.csv").unwrap_err().to_string();
+            assert!(e.contains(want), "got '{e}', want '{want}'");
         }
         // Not headers: an empty quoted name, a quoted number.
         for (src, want) in [
@@ -319,6 +426,10 @@ mod tests {
             (b"", "t.xyz: contains no points"),
             (b"1.5\n", "t.xyz:1: expected 'x y z' or a point count"),
             (b"1 2 3\n1,5 2,5 3,5\n", "t.xyz:2: point 1: '1,5 2,5 3,5' looks like decimal commas"),
+            // Whole x and y, a decimal comma in z only (session 24's audit): read as
+            // commas-and-spaces columns it was (0, 0, 0) and an ignored 5.
+            (b"0 0 0,5\n", "t.xyz:1: point 0: '0 0 0,5' looks like decimal commas"),
+            (b"1 2 3\n1\t0,25 7\n", "t.xyz:2: point 1: '1\\t0,25 7' looks like decimal commas"),
             (
                 b"1\t2\t3\n1,5\t2,5\t3,5 # c\n",
                 "t.xyz:2: point 1: '1,5\\t2,5\\t3,5' looks like decimal commas",

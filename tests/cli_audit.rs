@@ -130,7 +130,16 @@ fn degenerate_clouds_are_named() {
     let out = dir.p("line.obj");
     let err = assert_ok(&p2q(&["reconstruct", &line, "-o", &out]), "line");
     assert!(err.contains("warning: no faces") && err.contains(&line), "{err}");
+    assert!(!err.contains("can alone explain it"), "defaults blamed: {err}");
     assert!(faces(&out).is_empty());
+    // With candidate options off their defaults the warning names them (session 24's
+    // audit: `--per-point 64` or `--k 3` alone gave no faces and the input was blamed).
+    let err = assert_ok(&p2q(&["reconstruct", &line, "-o", &out, "--per-point", "64", "--k", "3"]), "line");
+    assert!(
+        err.contains("warning: no faces")
+            && err.contains("--k 3 (default 20) and --per-point 64 (default 32) can alone explain it"),
+        "{err}"
+    );
 }
 
 /// Regression: a missing output folder was found only when writing, after the work
@@ -496,6 +505,29 @@ fn training_without_validation_says_so() {
     ];
     let err = assert_ok(&p2q(&args), "train without validation");
     assert!(err.contains("no validation samples") && !err.contains("validation precision"), "{err}");
+    assert!(std::path::Path::new(&out).exists());
+}
+
+/// Session 24's audit: a learning rate far too large left finite weights whose products
+/// overflow, so the saved model gave NaN for every candidate and `train` exited 0. The
+/// epoch is now refused, naming the sample, and nothing is written (a sane rate on the
+/// same data writes the weights, so the refusal is the rate's).
+#[test]
+fn weights_that_give_nan_probabilities_are_a_divergence() {
+    let dir = Scratch::new("audit24_nan");
+    let data = dir.p("data");
+    assert_ok(&p2q(&["dataset", "--out", &data, "--synthetic", "1", "--seed", "3"]), "dataset");
+    let out = dir.p("m.p2qm");
+    let run = |lr: &str| p2q(&["train", "--data", &data, "--out", &out, "--epochs", "1", "--lr", lr]);
+    let before = dir.entries();
+    assert_fails(
+        &run("1e15"),
+        1,
+        &["training diverged in epoch 1", "syn_00000_height_field", "non-finite probability", "--lr"],
+        "lr 1e15",
+    );
+    assert_eq!(dir.entries(), before, "files left behind");
+    assert_ok(&run("1e-3"), "lr 1e-3");
     assert!(std::path::Path::new(&out).exists());
 }
 

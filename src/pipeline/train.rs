@@ -230,9 +230,7 @@ pub fn evaluate(model: &Model, samples: &[Sample], threshold: f32) -> Result<Cla
     let mut st = ClassStats::default();
     for s in samples {
         let x = sample_input(s, model.config().face_in());
-        let p = model
-            .predict_with_points(&s.points, &s.candidates, &x)
-            .map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))?;
+        let p = finite_probabilities(model, s, &x)?;
         for (&pi, &y) in p.iter().zip(&s.labels) {
             match (pi > threshold, y == 1) {
                 (true, true) => st.tp += 1,
@@ -244,6 +242,22 @@ pub fn evaluate(model: &Model, samples: &[Sample], threshold: f32) -> Result<Cla
         st.gt_faces += s.gt_faces.len();
     }
     Ok(st)
+}
+
+/// The model's probabilities for the candidates of `s` (`x`: their input rows), refused
+/// when one is NaN or infinite: finite weights can still overflow f32 on the way (a
+/// learning rate far too large), and such a model must not be scored or saved.
+fn finite_probabilities(model: &Model, s: &Sample, x: &[f32]) -> Result<Vec<f32>> {
+    let p = model
+        .predict_with_points(&s.points, &s.candidates, x)
+        .map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))?;
+    match p.iter().position(|v| !v.is_finite()) {
+        None => Ok(p),
+        Some(i) => Err(Error::invalid(format!(
+            "sample {}: the model gives a non-finite probability ({}) for candidate {i}",
+            s.name, p[i]
+        ))),
+    }
 }
 
 /// Trains `model` on `train` (validating on `val`) until `cfg.epochs`, continuing
@@ -400,7 +414,24 @@ pub fn train(
                 )));
             }
         }
-        let val_stats = evaluate(model, val, 0.5)?;
+        // Finite weights whose products overflow f32 give NaN probabilities: a
+        // divergence too (session 24's audit: `--lr 1e15` saved such weights). The
+        // validation pass checks every validation sample; without any, the first
+        // training sample is checked.
+        let diverged = |e: Error| {
+            let why = match e {
+                Error::InvalidInput(m) => m,
+                e => e.to_string(),
+            };
+            Error::invalid(format!(
+                "training diverged in epoch {}: {why} (nothing saved for it; try a smaller --lr)",
+                epoch + 1
+            ))
+        };
+        let val_stats = evaluate(model, val, 0.5).map_err(diverged)?;
+        if let (true, Some(s)) = (val.is_empty(), train.first()) {
+            finite_probabilities(model, s, &sample_input(s, fin)).map_err(diverged)?;
+        }
         let report = EpochReport {
             epoch: epoch + 1,
             loss: loss_sum / order.len() as f64,

@@ -279,10 +279,11 @@ pub fn run(argv: &[String]) -> Result<()> {
     if rep.faces == 0 {
         crate::output::stderr(&format!(
             "reconstruct: warning: no faces: {} holds no surface the model recognises \
-             ({} candidates, {} predicted real); the output has the points only\n",
+             ({} candidates, {} predicted real); the output has the points only{}\n",
             input.display(),
             rep.candidates,
-            rep.predicted
+            rep.predicted,
+            off_default_candidates(&cfg.candidates)
         ));
     }
     // A raw scan (points scattered at random, no quad layout) gives a sparse result
@@ -313,6 +314,28 @@ pub fn run(argv: &[String]) -> Result<()> {
         t0.elapsed().as_secs_f64() * 1e3
     ));
     Ok(())
+}
+
+/// When `--k` or `--per-point` differ from the defaults the shipped weights were trained
+/// with, a clause saying so for the no-faces warning (session 24's audit: `--per-point 64`
+/// or `--k 3` alone gave no faces, and the warning blamed the input); empty otherwise.
+fn off_default_candidates(c: &point2quad::pipeline::candidates::CandidateConfig) -> String {
+    let d = point2quad::pipeline::candidates::CandidateConfig::default();
+    let mut off = Vec::new();
+    if c.k != d.k {
+        off.push(format!("--k {} (default {})", c.k, d.k));
+    }
+    if c.per_point != d.per_point {
+        off.push(format!("--per-point {} (default {})", c.per_point, d.per_point));
+    }
+    if off.is_empty() {
+        return String::new();
+    }
+    format!(
+        "; the shipped weights were trained on candidates proposed with the defaults, and {} can alone \
+         explain it: try without",
+        off.join(" and ")
+    )
 }
 
 /// What the input hygiene left out or could not resolve (the library's

@@ -105,7 +105,7 @@ fn create_temp(path: &Path) -> Result<(PathBuf, File)> {
     for _ in 0..100 {
         let n = COUNTER.fetch_add(1, Ordering::Relaxed);
         let mut name = std::ffi::OsString::from(".");
-        name.push(file_name);
+        name.push(temp_stem(file_name));
         name.push(format!(".{pid}.{n}.tmp"));
         let tmp = dir.join(name);
         match OpenOptions::new().write(true).create_new(true).open(&tmp) {
@@ -116,6 +116,25 @@ fn create_temp(path: &Path) -> Result<(PathBuf, File)> {
     }
     let e = last_err.unwrap_or_else(|| io::Error::other("could not create a temporary file"));
     Err(Error::io(path, e))
+}
+
+/// The part of an output's file name its temporary file's name starts with: the whole
+/// name up to 200 bytes, else its first 200 bytes' worth of characters, so that the
+/// temporary name (with its dot, process id and counter) stays within the 255 bytes file
+/// systems allow where the output's own name fits (session 24's audit: names of 235 to
+/// 255 bytes failed at the end of the work). Only a temporary name: it need not be the
+/// exact bytes, just a valid name in the same folder.
+fn temp_stem(file_name: &std::ffi::OsStr) -> std::ffi::OsString {
+    const MAX: usize = 200;
+    if file_name.len() <= MAX {
+        return file_name.to_os_string();
+    }
+    let lossy = file_name.to_string_lossy();
+    let mut end = MAX;
+    while !lossy.is_char_boundary(end) {
+        end -= 1;
+    }
+    lossy[..end].into()
 }
 
 /// The process id where the platform has one (wasm32-unknown-unknown panics on
@@ -238,6 +257,23 @@ mod tests {
         write_atomic(&p, |w| w.write_all(b"two!").map_err(|e| Error::io("x", e))).unwrap();
         assert_eq!(fs::read(&p).unwrap(), b"two!");
         assert_eq!(entries(&d), vec!["a.txt"]);
+        fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// A name of 255 bytes (the usual limit), ASCII or with multibyte characters at the
+    /// cut, is written and leaves no temporary file (the temporary name was 255 + 12
+    /// bytes and the write failed).
+    #[test]
+    fn the_longest_names_are_written() {
+        let d = scratch_dir("long");
+        for name in ["a".repeat(251) + ".obj", "é".repeat(125) + "x.obj", "a".repeat(200) + ".off"] {
+            assert!(name.len() <= 255 && name.len() >= 200, "{}", name.len());
+            let p = d.join(&name);
+            write_atomic(&p, |w| w.write_all(b"one").map_err(|e| Error::io("x", e))).unwrap();
+            assert_eq!(fs::read(&p).unwrap(), b"one");
+            assert_eq!(entries(&d), vec![name.clone()]);
+            fs::remove_file(&p).unwrap();
+        }
         fs::remove_dir_all(&d).unwrap();
     }
 

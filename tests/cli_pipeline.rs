@@ -439,6 +439,18 @@ fn refine_trains_rounds_that_reconstruct_reads() {
         let err = fails(&["reconstruct", &cloud, "-o", &s.p("never.obj"), opt, "0.3", "--no-rescue"], 2);
         assert!(err.contains(opt) && err.contains("--no-rescue"), "{err}");
     }
+    // Post-process settings with the post-process off were ignored without a word.
+    let never_obj = s.p("never.obj");
+    for opt in [
+        &["--max-floater-faces", "2"][..],
+        &["--rescue-min-prob", "0.3"],
+        &["--no-close"],
+        &["--no-untangle"],
+    ] {
+        let args = [&["reconstruct", &cloud, "-o", &never_obj, "--no-postprocess"][..], opt].concat();
+        let err = fails(&args, 2);
+        assert!(err.contains(opt[0]) && err.contains("no effect with --no-postprocess"), "{err}");
+    }
     assert!(!Path::new(&s.p("never.obj")).exists());
     // Bad options: usage errors naming the option; nothing written.
     let never = s.p("never.p2qm");

@@ -169,6 +169,17 @@ pub fn run(argv: &[String]) -> Result<()> {
             )));
         }
     }
+    if !cfg.run_postprocess {
+        let valued = ["--max-floater-faces", "--rescue-min-prob", "--rescue-lone"];
+        let switches = ["--no-rescue", "--no-close", "--no-seal", "--no-inverted-fills", "--no-untangle"];
+        let given = valued.iter().find(|o| a.value(o).is_some()).or(switches.iter().find(|o| a.switch(o)));
+        if let Some(opt) = given {
+            return Err(Error::Usage(format!(
+                "{cmd}: {opt} sets a post-process step and has no effect with --no-postprocess; give one of them"
+            )));
+        }
+    }
+    let pp = &mut cfg.postprocess;
     if a.value("--rescue-lone").is_some() {
         pp.rescue.lone_min_prob =
             Some(a.parsed_in(cmd, "--rescue-lone", 0.5f32, 0.0, 1.0, "it is a probability")?);

@@ -531,6 +531,30 @@ fn weights_that_give_nan_probabilities_are_a_divergence() {
     assert!(std::path::Path::new(&out).exists());
 }
 
+/// Session 24's audit, small items: `candidates -o x.obj` wrote the index list under a
+/// mesh's name; `synth --noise 1e300` printed 301 digits; a no-break space between the
+/// values was shown as a space, so the message quoted a line that looked right. Each is
+/// now a clear error, and nothing is written.
+#[test]
+fn misnamed_outputs_huge_values_and_hidden_spaces_are_named() {
+    let dir = Scratch::new("audit24_small");
+    let cloud = dir.write("c.xyz", &xyz(&cube_cloud(1.0)));
+    let before = dir.entries();
+    for ext in ["obj", "PLY", "off"] {
+        let out = dir.p(&format!("cands.{ext}"));
+        assert_fails(&p2q(&["candidates", &cloud, "-o", &out]), 2, &[&out, "text list", ".txt"], ext);
+    }
+    let r = p2q(&["synth", "-o", &dir.p("s.xyz"), "--noise", "1e300"]);
+    assert_fails(&r, 2, &["--noise", "got 1e300"], "synth --noise 1e300");
+    assert!(stderr(&r).len() < 400, "{}", stderr(&r));
+    let nbsp = dir.write("nbsp.xyz", "1\u{a0}2\u{a0}3\n4 5 6\n".as_bytes());
+    let before_nbsp = dir.entries();
+    let r = p2q(&["reconstruct", &nbsp, "-o", &dir.p("n.obj")]);
+    assert_fails(&r, 1, &[&format!("{nbsp}:1"), "1\\u{a0}2\\u{a0}3"], "no-break spaces");
+    assert_eq!(dir.entries(), before_nbsp, "files left behind");
+    assert_eq!(before.len() + 1, before_nbsp.len());
+}
+
 /// Session 20's audit: `candidates` ran on the raw cloud while `reconstruct` cleaned it
 /// first, so a grid with a point at 1e30 gave no candidate at all, and a grid with
 /// copies gave candidates over the copies. Both now see the cleaned cloud: the

@@ -74,10 +74,23 @@ pub(crate) fn parse_off_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
             cl = l;
         }
     }
-    let counts: Vec<&[u8]> = toks.take(3).collect();
-    if counts.len() < 2 {
+    let all: Vec<&[u8]> = toks.collect();
+    if all.len() < 2 {
         return Err(Error::parse(name, cl, "expected the counts 'vertices faces [edges]'"));
     }
+    // More than three numbers: the vertices were run on after the counts (a whole file
+    // on one line); reported as such, not as a file truncated at vertex 0.
+    if all.len() > 3 {
+        return Err(Error::parse(
+            name,
+            cl,
+            format!(
+                "the counts line holds {} values after 'vertices faces edges';                  each vertex and each face must be on its own line",
+                all.len() - 3
+            ),
+        ));
+    }
+    let counts = all;
     let count = |t: &[u8], what: &str| -> Result<usize> {
         match parse_i64(t).and_then(|v| usize::try_from(v).ok()) {
             Some(v) => Ok(v),
@@ -256,6 +269,7 @@ mod tests {
             ("XOFF\n", "t.off:1: unknown OFF header"),
             ("OFF\n4 x 0\n", "t.off:2: bad face count 'x'"),
             ("OFF\n4\n", "t.off:2: expected the counts"),
+            ("OFF 3 0 0 0 0 0 1 0 0 0 1 0\n", "t.off:1: the counts line holds 9 values after"),
             ("OFF\n5 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n", "t.off: truncated: file ends at vertex 4 of 5"),
             (
                 "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n",

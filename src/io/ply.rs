@@ -308,6 +308,13 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                         ))
                     }
                 }
+                if let Some(extra) = t.next() {
+                    return Err(Error::parse(
+                        name,
+                        ln,
+                        format!("unexpected '{}' after the format's version", show(extra)),
+                    ));
+                }
                 format = Some((f, ln));
             }
             b"comment" | b"obj_info" | b"" => {}
@@ -985,6 +992,7 @@ mod tests {
         let cases: Vec<(String, &str)> = vec![
             ("ply\nformat binary_middle_endian 1.0\nend_header\n".into(), "t.ply:2: unknown PLY format"),
             ("plx\n".into(), "t.ply:1: not a PLY file"),
+            ("ply\nformat ascii 1.0 junk\nend_header\n".into(), "t.ply:2: unexpected 'junk' after the format's version"),
             ("ply\nformat ascii 1.0\n".into(), "t.ply:3: header not terminated"),
             ("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n0 0\n".into(), "t.ply:3: element vertex has no property 'z'"),
             ("ply\nformat ascii 1.0\nelement vertex 1\nproperty blob x\nend_header\n".into(), "t.ply:4: unknown property type 'blob'"),

@@ -180,7 +180,9 @@ pub(crate) fn show(tok: &[u8]) -> String {
     const MAX: usize = 40;
     let mut s = String::new();
     for c in String::from_utf8_lossy(&tok[..tok.len().min(MAX)]).chars() {
-        if c.is_control() {
+        // Non-ASCII spaces (a no-break space from a spreadsheet) are shown escaped: they
+        // look like separators but are none.
+        if c.is_control() || (c.is_whitespace() && !c.is_ascii()) {
             s.extend(c.escape_default());
         } else {
             s.push(c);
@@ -342,6 +344,8 @@ mod tests {
         assert!(!s.chars().any(char::is_control), "{s:?}");
         assert!(s.starts_with("a\\u{1b}[2Jb"), "{s:?}");
         assert_eq!(show(b"plain"), "plain");
+        // A no-break space looks like a separator: shown escaped (session 24's audit).
+        assert_eq!(show("1\u{a0}2\u{2007}3 4".as_bytes()), "1\\u{a0}2\\u{2007}3 4");
     }
 
     #[test]

@@ -117,8 +117,10 @@ impl Args {
         let v = self.parsed(cmd, name, default)?;
         // Written so that NaN (which compares false with everything) is refused too.
         if !(v >= lo && v <= hi) {
+            // As typed: `1e300` read as f64 printed 301 digits (session 24's audit).
+            let got = self.value(name).map_or_else(|| v.to_string(), str::to_string);
             return Err(Error::Usage(format!(
-                "{cmd}: {name} must be between {lo} and {hi}, got {v} ({why})"
+                "{cmd}: {name} must be between {lo} and {hi}, got {got} ({why})"
             )));
         }
         Ok(v)
@@ -185,6 +187,14 @@ mod tests {
             );
         }
         assert!(k(&["--k", "-1"]).unwrap_err().to_string().contains("cannot parse"));
+        // A float out of range is echoed as typed, not with all its digits.
+        let spec = Spec { valued: &["--f"], switches: &[] };
+        let e = Args::parse("x", &v(&["--f", "1e300"]), &spec)
+            .unwrap()
+            .parsed_in("x", "--f", 0.5f64, 0.0, 1.0, "why")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("got 1e300 (why)") && e.len() < 100, "{e}");
     }
 
     #[test]

@@ -83,6 +83,14 @@ pub fn run(argv: &[String]) -> Result<()> {
     let points = point2quad::io::points::read_points(std::path::Path::new(input))?;
     let t_read = t0.elapsed();
     // After the input (its errors come first), before the work.
+    // A mesh or picture name got the index list under it (session 24's audit).
+    let ext = std::path::Path::new(&output).extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if let Some(e) = ext.filter(|e| ["obj", "ply", "off", "svg", "stl"].contains(&e.as_str())) {
+        return Err(Error::Usage(format!(
+            "{CMD}: -o {output}: the candidates are a text list (4 point indices per line), not a .{e} file; \
+             name it .txt (`point2quad reconstruct` writes meshes)"
+        )));
+    }
     crate::output::check_output_path(std::path::Path::new(&output))?;
     crate::output::check_not_input(CMD, std::path::Path::new(&output), std::path::Path::new(input))?;
     // The library's refusals do not know the file; name it (once: not "invalid

@@ -438,6 +438,16 @@ fn sanitize(stem: &str) -> String {
     }
 }
 
+/// A number for a message: in exponent form when very large or small (`{}` printed 1e300
+/// with all its 301 digits; session 24's audit).
+pub(crate) fn short(v: f64) -> String {
+    if v != 0.0 && v.is_finite() && !(1e-4..1e6).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        v.to_string()
+    }
+}
+
 /// The bounds of `--noise` and `--offset` (`dataset` and `synth`): finite, at least 0 and
 /// at most [`MAX_NOISE`].
 ///
@@ -446,13 +456,17 @@ fn sanitize(stem: &str) -> String {
 pub(crate) fn check_noise(cmd: &str, noise: &NoiseConfig) -> Result<()> {
     for (name, v) in [("--noise", noise.fraction), ("--offset", noise.offset)] {
         if !(v.is_finite() && v >= 0.0) {
-            return Err(Error::Usage(format!("{cmd}: {name} must be a finite number >= 0, got {v}")));
+            return Err(Error::Usage(format!(
+                "{cmd}: {name} must be a finite number >= 0, got {}",
+                short(v)
+            )));
         }
         // A typo (1e9) otherwise fails only inside the first sample, after the output
         // folder was made.
         if v > MAX_NOISE {
             return Err(Error::Usage(format!(
-                "{cmd}: {name} must be at most {MAX_NOISE}, got {v} (the surface would be lost in the noise)"
+                "{cmd}: {name} must be at most {MAX_NOISE}, got {} (the surface would be lost in the noise)",
+                short(v)
             )));
         }
     }

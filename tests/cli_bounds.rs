@@ -44,7 +44,8 @@ fn work_sizing_options_are_bounded() {
         (
             vec!["dataset", "--out", &ds, "--synthetic", "1", "--min-aspect", "nan"],
             "--min-aspect must be between 0.05 and 1",
-            "NaN",
+            // Echoed as typed (session 24).
+            "nan",
         ),
         (vec!["candidates", c, "-o", &cand, "--k", "2"], "--k must be between 3 and 64", "2"),
         (vec!["candidates", c, "-o", &cand, "--k", huge], "--k must be between 3 and 64", huge),

@@ -141,11 +141,21 @@ proptest! {
 /// (share 0) the copies are separate points and the result differs.
 #[test]
 fn near_copies_give_the_faces_of_the_cloud() {
+    // The shipped weights (an untrained model's handful of faces on this torus fell
+    // to 49 when the rescue stopped folding quads back, session 24): most of the
+    // torus's 128 faces, so the equalities below compare real reconstructions.
+    static SHIPPED: OnceLock<Model> = OnceLock::new();
+    let model = || {
+        SHIPPED.get_or_init(|| {
+            let p = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/point2quad-default.p2qm");
+            Model::load(std::path::Path::new(p)).expect("test: shipped weights")
+        })
+    };
     let mesh = shapes::torus(16, 8, 1.0, 0.35);
     let pts = mesh.vertices.clone();
-    let cfg = ReconstructConfig { threshold: 0.3, ..Default::default() };
+    let cfg = ReconstructConfig::default();
     let (clean, _) = reconstruct_with_report(&pts, model(), &cfg).expect("clean");
-    assert!(clean.quads.len() > 50, "{}", clean.quads.len());
+    assert!(clean.quads.len() > 100, "{}", clean.quads.len());
     let mut both = pts.clone();
     both.extend(pts.iter().map(|p| [p[0] * (1.0 + 1e-9), p[1] - 1e-9, p[2]]));
     let (m, rep) = reconstruct_with_report(&both, model(), &cfg).expect("with copies");

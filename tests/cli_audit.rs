@@ -137,7 +137,8 @@ fn degenerate_clouds_are_named() {
     let err = assert_ok(&p2q(&["reconstruct", &line, "-o", &out, "--per-point", "64", "--k", "3"]), "line");
     assert!(
         err.contains("warning: no faces")
-            && err.contains("--k 3 (default 20) and --per-point 64 (default 32) can alone explain it"),
+            && err.contains("--k 3 (default 20) and --per-point 64 (default 32) differ from the defaults")
+            && err.contains("can alone explain it"),
         "{err}"
     );
 }

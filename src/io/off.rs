@@ -85,7 +85,8 @@ pub(crate) fn parse_off_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
             name,
             cl,
             format!(
-                "the counts line holds {} values after 'vertices faces edges';                  each vertex and each face must be on its own line",
+                "the counts line holds {} value(s) after 'vertices faces edges'; \
+                 each vertex and each face must be on its own line",
                 all.len() - 3
             ),
         ));
@@ -269,7 +270,10 @@ mod tests {
             ("XOFF\n", "t.off:1: unknown OFF header"),
             ("OFF\n4 x 0\n", "t.off:2: bad face count 'x'"),
             ("OFF\n4\n", "t.off:2: expected the counts"),
-            ("OFF 3 0 0 0 0 0 1 0 0 0 1 0\n", "t.off:1: the counts line holds 9 values after"),
+            (
+                "OFF 3 0 0 0 0 0 1 0 0 0 1 0\n",
+                "t.off:1: the counts line holds 9 value(s) after 'vertices faces edges'; each vertex",
+            ),
             ("OFF\n5 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n", "t.off: truncated: file ends at vertex 4 of 5"),
             (
                 "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n",

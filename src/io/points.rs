@@ -61,9 +61,12 @@ pub fn read_points(path: &Path) -> Result<Vec<[f64; 3]>> {
 /// colours…) are ignored. A first data line holding a single integer is a point
 /// count (the `.pts` convention) and must match the number of points. A first data
 /// line of at least 3 column names (each starting with a letter or `_`, none of them a
-/// number, so `nan` or `inf` are not names) is a CSV-style header and is skipped. A data
-/// line that mixes the two separators, `1,5 2,5 3,5` (decimal commas), is an error,
-/// not the point (1, 5, 2). For mesh
+/// number, so `nan` or `inf` are not names) is a CSV-style header: columns it names `x`,
+/// `y` and `z` (any case) are read wherever they are (`id,x,y,z`), otherwise the first
+/// three (see `header_columns` for the headers refused). A data line that mixes the two
+/// separators, `1,5 2,5 3,5`, or whose whitespace-separated coordinates hold a comma
+/// between digits, `0 0 0,5` (decimal commas), is an error, not the point (1, 5, 2) or
+/// (0, 0, 0). For mesh
 /// formats only the vertices are taken (faces are not read, except that PLY
 /// still checks every element's length).
 ///
@@ -119,7 +122,10 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
             }
         }
         let i = points.len();
-        if let Some(data) = decimal_comma_line(raw) {
+        // The values that give the coordinates: the first three, or up to the last
+        // column the header names.
+        let upto = columns.iter().max().map_or(3, |&c| (c + 1).max(3));
+        if let Some(data) = decimal_comma_line(raw, upto) {
             return Err(Error::parse(
                 name,
                 ln,
@@ -140,7 +146,9 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
                 *c = coord(tok, name, ln, &format_args!("point {i}"))?;
             }
         } else {
-            let row: Vec<&[u8]> = std::iter::once(t0).chain(toks).collect();
+            // Columns found by name are counted with every field, empty ones too
+            // (`1,,0.5,1,2`): merging separators as above would shift them.
+            let row = fields(raw);
             for (c, &col) in p.iter_mut().zip(&columns) {
                 let tok = row.get(col).ok_or_else(|| {
                     Error::parse(
@@ -170,14 +178,30 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
     Ok(points)
 }
 
+/// The fields of `line` (without its `#` comment) for columns found by name: split at
+/// every comma, each trimmed, when it holds one (so an empty field keeps its place),
+/// else at runs of whitespace.
+fn fields(line: &[u8]) -> Vec<&[u8]> {
+    let data = match text::find_byte(line, b'#') {
+        Some(i) => &line[..i],
+        None => line,
+    };
+    if text::find_byte(data, b',').is_some() {
+        data.split(|&b| b == b',').map(trim_space).collect()
+    } else {
+        data.split(|&b| text::is_space(b)).filter(|t| !t.is_empty()).collect()
+    }
+}
+
 /// The data of `line` (without its `#` comment, trimmed) when it mixes the two column
-/// separators in its first three values: one of its first three comma-separated fields,
+/// separators in its first `upto` values (at least 3: those that give the coordinates):
+/// one of its first `upto` comma-separated fields,
 /// trimmed, still holds whitespace, and the three coordinates do not all come before
 /// the first comma (`1 2 3 0.5,0.2` is a whitespace line with a comma in an ignored
 /// column). That is the mark of decimal commas, `1,5 2,5 3,5`,
 /// which read as commas-and-spaces columns gives the point (1, 5, 2), silently. Plain
 /// CSV, with or without spaces after the commas (`1.0, 2.0, 3.0`), never mixes them.
-fn decimal_comma_line(line: &[u8]) -> Option<&[u8]> {
+fn decimal_comma_line(line: &[u8], upto: usize) -> Option<&[u8]> {
     text::find_byte(line, b',')?;
     let data = match text::find_byte(line, b'#') {
         Some(i) => &line[..i],
@@ -187,30 +211,28 @@ fn decimal_comma_line(line: &[u8]) -> Option<&[u8]> {
     // Only the values that give the coordinates count: extra columns are ignored, so a
     // CSV's fourth field may hold spaces (`1,2,3,red car`), and a whitespace-separated
     // line may hold commas after its third column (`1 2 3 0.5,0.2`).
-    let mixed = data.split(|&b| b == b',').take(3).any(|f| trim_space(f).iter().any(|&b| text::is_space(b)));
+    let mixed =
+        data.split(|&b| b == b',').take(upto).any(|f| trim_space(f).iter().any(|&b| text::is_space(b)));
     let first = data.split(|&b| b == b',').next().unwrap_or_default();
-    let coords_before_commas = first.split(|&b| text::is_space(b)).filter(|t| !t.is_empty()).count() >= 3;
+    let coords_before_commas = first.split(|&b| text::is_space(b)).filter(|t| !t.is_empty()).count() >= upto;
     // `0 0 0,5`: whitespace separates the columns and one of the first three values holds
     // a comma between digits, while no value starts or ends with a comma (so commas are
     // not separators here, as in `1, 2, 3`). Read with commas as separators it gives the
     // point (0, 0, 0) and an ignored 5, silently.
-    let words: Vec<&[u8]> = data.split(|&b| text::is_space(b)).filter(|t| !t.is_empty()).collect();
-    // Each of the first three words must read as a number once its comma is a point
-    // (`1,2,3,a b` is a CSV row with a spaced fourth field, not decimals).
+    let words: Vec<&[u8]> = data.split(|&b| text::is_space(b)).filter(|t| !t.is_empty()).take(upto).collect();
+    // Each of those words must read as a number once its comma is a point (`1,2,3,a b`
+    // is a CSV row with a spaced fourth field, not decimals); `1e-3 0 0,5` is one too.
     let as_decimal = |w: &&[u8]| {
         let commas = w.iter().filter(|&&b| b == b',').count();
         let dotted: Vec<u8> = w.iter().map(|&b| if b == b',' { b'.' } else { b }).collect();
-        commas <= 1
-            && !dotted.contains(&b'e')
-            && !dotted.contains(&b'E')
-            && text::parse_f64(&dotted).is_some()
+        commas <= 1 && text::parse_f64(&dotted).is_some()
     };
     let decimal_word =
         |w: &&[u8]| w.windows(3).any(|t| t[0].is_ascii_digit() && t[1] == b',' && t[2].is_ascii_digit());
-    let glued_commas = words.len() >= 3
+    let glued_commas = words.len() >= upto
         && words.iter().all(|w| w.first() != Some(&b',') && w.last() != Some(&b','))
-        && words.iter().take(3).all(as_decimal)
-        && words.iter().take(3).any(decimal_word);
+        && words.iter().all(as_decimal)
+        && words.iter().any(decimal_word);
     ((mixed && !coords_before_commas) || glued_commas).then(|| trim_space(data))
 }
 
@@ -224,11 +246,14 @@ fn trim_space(f: &[u8]) -> &[u8] {
 /// Where a header row (see [`is_column_header`]) puts x, y and z: the columns named
 /// `x`, `y` and `z` (case-insensitive, quotes dropped) wherever they are, so `id,x,y,z`
 /// and `z,y,x` read right; the first three columns when it names none of them
-/// (`_x, pos_y, z1`). A header that names some but not all three is refused (the
-/// message), as is one that names one twice.
+/// (`_x, pos_y, z1`) or names only some, each in its place among the first three
+/// (`lon,lat,z`, `E,N,Z`, `x,y,height`). A header that names some but not all three
+/// with one out of its place (`id,x,y`) is refused (the message), as is one that
+/// names one twice.
 fn header_columns(line: &[u8]) -> std::result::Result<[usize; 3], String> {
     let mut found: [Option<usize>; 3] = [None; 3];
-    let names: Vec<String> = Tokens::with_commas(line)
+    let names: Vec<String> = fields(line)
+        .into_iter()
         .map(|tok| {
             let tok = match tok {
                 [b'"', inner @ .., b'"'] => inner,
@@ -247,13 +272,14 @@ fn header_columns(line: &[u8]) -> std::result::Result<[usize; 3], String> {
     }
     match found {
         [Some(x), Some(y), Some(z)] => Ok([x, y, z]),
-        [None, None, None] => Ok([0, 1, 2]),
+        _ if found.iter().enumerate().all(|(axis, f)| f.map_or(true, |c| c == axis)) => Ok([0, 1, 2]),
         _ => {
             let missing: Vec<&str> =
                 ["x", "y", "z"].iter().zip(&found).filter(|(_, f)| f.is_none()).map(|(a, _)| *a).collect();
             Err(format!(
-                "the header names some coordinate columns but not {}; name the three columns x, y and z, \
-                 or give no header (the first three columns are then x, y, z)",
+                "the header names some coordinate columns, one not among the first three, but not {}; \
+                 name the three columns x, y and z, or give no header (the first three columns are \
+                 then x, y, z)",
                 missing.join(" or ")
             ))
         }
@@ -356,8 +382,8 @@ mod tests {
         assert_eq!(p, vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]]);
     }
 
-    /// A CSV-style first line of column names is skipped; only the first data line, and
-    /// only when every token is a name.
+    /// A CSV-style first line of column names is a header (only the first data line, and
+    /// only when every token is a name): it names the coordinate columns or is skipped.
     #[test]
     fn a_column_header_row_is_skipped() {
         let want = vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]];
@@ -376,12 +402,24 @@ mod tests {
             &b"id,x,y,z\n0,1,2,3\n1,4,5,6\n"[..],
             b"z,y,x\n3,2,1\n6,5,4\n",
             b"\"Z\" \"nx\" \"X\" \"Y\"\n3 0 1 2\n6 0 4 5\n",
+            // Empty fields keep their place (merged, x would be read from `name`'s place).
+            b"id,name,x,y,z,w\n1,,1,2,3,9\n2,b,4,5,6,9\n",
+            // Some axes named, each in its place among the first three: the first three.
+            b"lon,lat,z\n1,2,3\n4,5,6\n",
+            b"E N Z\n1 2 3\n4 5 6\n",
+            b"x,y,height\n1,2,3\n4,5,6\n",
         ] {
             let got = parse_points(src, PointFormat::Xyz, "t.csv");
             assert_eq!(got.unwrap(), want, "{}", String::from_utf8_lossy(src));
         }
         for (src, want) in [
-            (&b"x,y,height\n1,2,3\n"[..], "t.csv:1: the header names some coordinate columns but not z"),
+            (
+                &b"id,x,y\n1,2,3\n"[..],
+                "t.csv:1: the header names some coordinate columns, one not among the first three, but not z",
+            ),
+            (b"lat,z\n1,2,3\n", "t.csv:1: point 0: bad number 'lat'"),
+            // Decimal commas in a named column after the third (it was (1, 2, 3)).
+            (b"id x y z\n7 1 2 3,5\n", "t.csv:2: point 0: '7 1 2 3,5' looks like decimal commas"),
             (b"x,x,y,z\n1,2,3,4\n", "t.csv:1: the header names column 'x' twice"),
             (
                 b"id,x,y,z\n1,2,3\n",
@@ -429,6 +467,8 @@ mod tests {
             // Whole x and y, a decimal comma in z only (session 24's audit): read as
             // commas-and-spaces columns it was (0, 0, 0) and an ignored 5.
             (b"0 0 0,5\n", "t.xyz:1: point 0: '0 0 0,5' looks like decimal commas"),
+            (b"1e-3 0 0,5\n", "t.xyz:1: point 0: '1e-3 0 0,5' looks like decimal commas"),
+            (b"0 0 0,5 255,\n", "t.xyz:1: point 0: '0 0 0,5 255,' looks like decimal commas"),
             (b"1 2 3\n1\t0,25 7\n", "t.xyz:2: point 1: '1\\t0,25 7' looks like decimal commas"),
             (
                 b"1\t2\t3\n1,5\t2,5\t3,5 # c\n",

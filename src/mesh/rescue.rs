@@ -127,7 +127,9 @@ pub fn rescue_faces(
     // to one face (the quad would share three corners with it and fold over it, at a
     // convex corner of a border), or when the quad, turned to agree with a face across
     // one of them, faces away from it by more than `min_normal_dot` allows (folded back
-    // over it) or has no normal.
+    // over it) or either has no normal (no fold can be ruled out: unlike the closing,
+    // which skips the test there, the rescue only adds faces and leaves such an edge to
+    // the hole filling).
     let glued = |mesh: &HalfedgeMesh, f: &[u32; 4]| -> Option<usize> {
         let mut across: [Option<FaceId>; 4] = [None; 4];
         let mut g = 0;

@@ -226,11 +226,24 @@ fn rotate_row(row: &mut [f32], r: &[[f64; 3]; 3]) {
 /// `InvalidInput` naming the sample when its features or candidates do not fit the
 /// model, or its cloud cannot be encoded.
 pub fn evaluate(model: &Model, samples: &[Sample], threshold: f32) -> Result<ClassStats> {
+    evaluate_checked(model, samples, threshold)?.map_err(Error::invalid)
+}
+
+/// [`evaluate`], with a non-finite probability as the inner error (its message), apart
+/// from the errors of the samples and the network.
+fn evaluate_checked(
+    model: &Model,
+    samples: &[Sample],
+    threshold: f32,
+) -> Result<std::result::Result<ClassStats, String>> {
     check_samples(samples, model)?;
     let mut st = ClassStats::default();
     for s in samples {
         let x = sample_input(s, model.config().face_in());
-        let p = finite_probabilities(model, s, &x)?;
+        let p = match finite_probabilities(model, s, &x)? {
+            Ok(p) => p,
+            Err(why) => return Ok(Err(why)),
+        };
         for (&pi, &y) in p.iter().zip(&s.labels) {
             match (pi > threshold, y == 1) {
                 (true, true) => st.tp += 1,
@@ -241,23 +254,28 @@ pub fn evaluate(model: &Model, samples: &[Sample], threshold: f32) -> Result<Cla
         }
         st.gt_faces += s.gt_faces.len();
     }
-    Ok(st)
+    Ok(Ok(st))
 }
 
-/// The model's probabilities for the candidates of `s` (`x`: their input rows), refused
-/// when one is NaN or infinite: finite weights can still overflow f32 on the way (a
-/// learning rate far too large), and such a model must not be scored or saved.
-fn finite_probabilities(model: &Model, s: &Sample, x: &[f32]) -> Result<Vec<f32>> {
+/// The model's probabilities for the candidates of `s` (`x`: their input rows); the
+/// inner error (its message) when one is NaN or infinite: finite weights can still
+/// overflow f32 on the way (a learning rate far too large), and such a model must not be
+/// scored or saved.
+fn finite_probabilities(
+    model: &Model,
+    s: &Sample,
+    x: &[f32],
+) -> Result<std::result::Result<Vec<f32>, String>> {
     let p = model
         .predict_with_points(&s.points, &s.candidates, x)
         .map_err(|e| Error::invalid(format!("sample {}: {e}", s.name)))?;
-    match p.iter().position(|v| !v.is_finite()) {
+    Ok(match p.iter().position(|v| !v.is_finite()) {
         None => Ok(p),
-        Some(i) => Err(Error::invalid(format!(
+        Some(i) => Err(format!(
             "sample {}: the model gives a non-finite probability ({}) for candidate {i}",
             s.name, p[i]
-        ))),
-    }
+        )),
+    })
 }
 
 /// Trains `model` on `train` (validating on `val`) until `cfg.epochs`, continuing
@@ -417,20 +435,17 @@ pub fn train(
         // Finite weights whose products overflow f32 give NaN probabilities: a
         // divergence too (session 24's audit: `--lr 1e15` saved such weights). The
         // validation pass checks every validation sample; without any, the first
-        // training sample is checked.
-        let diverged = |e: Error| {
-            let why = match e {
-                Error::InvalidInput(m) => m,
-                e => e.to_string(),
-            };
+        // training sample that trains is checked.
+        let diverged = |why: String| {
             Error::invalid(format!(
                 "training diverged in epoch {}: {why} (nothing saved for it; try a smaller --lr)",
                 epoch + 1
             ))
         };
-        let val_stats = evaluate(model, val, 0.5).map_err(diverged)?;
-        if let (true, Some(s)) = (val.is_empty(), train.first()) {
-            finite_probabilities(model, s, &sample_input(s, fin)).map_err(diverged)?;
+        let val_stats = evaluate_checked(model, val, 0.5)?.map_err(diverged)?;
+        if val.is_empty() {
+            let s = &train[usable[0]];
+            finite_probabilities(model, s, &sample_input(s, fin))?.map_err(diverged)?;
         }
         let report = EpochReport {
             epoch: epoch + 1,

@@ -18,8 +18,8 @@ USAGE:
     point2quad reconstruct INPUT -o OUT.{obj,ply,off} [OPTIONS]
 
 INPUT is a point cloud (.xyz/.txt/.pts/.csv, .ply, .obj or .off; only positions are
-read; a first line of column names such as x,y,z is skipped), at any scale, pose or
-offset. The output mesh's vertices are the input points, written back exactly and in
+read; a first line of column names is a header: columns named x, y, z are read
+wherever they are, else the first three), at any scale, pose or offset. The output mesh's vertices are the input points, written back exactly and in
 input order (points no face uses stay as isolated vertices), then any vertices hole
 filling added. Duplicate and near-duplicate points count once (faces use the first of
 each group), and far outliers (more than 10,000 times the cloud's radius away) are
@@ -343,8 +343,8 @@ fn off_default_candidates(c: &point2quad::pipeline::candidates::CandidateConfig)
         return String::new();
     }
     format!(
-        "; the shipped weights were trained on candidates proposed with the defaults, and {} can alone \
-         explain it: try without",
+        "; {} differ from the defaults that the shipped weights and `point2quad dataset` use, \
+         which can alone explain it: try without",
         off.join(" and ")
     )
 }

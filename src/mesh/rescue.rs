@@ -41,7 +41,11 @@ pub struct RescueConfig {
     /// A candidate is refused when, oriented to agree with a face it glues to, its
     /// normal and that face's are further apart than this dot product allows (session
     /// 24: a quad glued on two border edges of a flat patch could lie folded back over
-    /// the patch's own faces). The hole filling and the closing use the same bound.
+    /// the patch's own faces). −0.9: folded back to within ≈ 25° of the face. Not the
+    /// hole filling's and the closing's −0.3 (a dihedral sharper than ≈ 73°): real
+    /// surfaces have such creases (thin shells' rims, knife edges; 636 edges of the
+    /// training set's organic and thin meshes), and that bound refused their true faces
+    /// (session 25), while they almost never fold back so far (none under −0.95).
     pub min_normal_dot: f64,
 }
 
@@ -53,7 +57,7 @@ impl Default for RescueConfig {
             min_glued: 2,
             max_passes: 16,
             lone_min_prob: None,
-            min_normal_dot: -0.3,
+            min_normal_dot: -0.9,
         }
     }
 }
@@ -311,6 +315,37 @@ mod tests {
         // A true face of a hole in the same patch still goes in, in that pose too.
         let mut mesh = HalfedgeMesh::from_quads(p.len(), &q[1..]).unwrap();
         assert_eq!(rescue_faces(&mut mesh, &p, &q, &[0.5; 4], &[0], &RescueConfig::default()), vec![0]);
+    }
+
+    /// Session 25: the bound tells a crease from a fold. A quad hinged on one edge of
+    /// a unit square (glued on that edge alone, `min_glued` 1) at angle θ from the
+    /// square's plane continued (θ = 0: flat; 180°: lying back over the square) has the
+    /// normal dot cos θ with it. Sharp true creases (θ = 120°, 150°: dot −0.5, −0.87)
+    /// go in; folds back within 18° (dot under −0.95) stay out; whatever the pose.
+    #[test]
+    fn creases_go_in_and_folds_stay_out() {
+        let mut rng = crate::rng::Rng::new(25);
+        for deg in [0.0f64, 60.0, 120.0, 150.0, 162.0, 170.0, 180.0] {
+            let t = deg.to_radians();
+            let d = [t.cos(), 0.0, t.sin()];
+            let p = [
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [1.0 + d[0], 0.0, d[2]],
+                [1.0 + d[0], 1.0, d[2]],
+            ];
+            let r = rng.rotation();
+            let p: Vec<[f64; 3]> = p.iter().map(|v| crate::math::mat_vec(&r, *v)).collect();
+            let cfg = RescueConfig { min_glued: 1, ..RescueConfig::default() };
+            let mut mesh = HalfedgeMesh::from_quads(6, &[[0, 1, 2, 3]]).unwrap();
+            let got = rescue_faces(&mut mesh, &p, &[[2, 1, 4, 5]], &[0.9], &[0], &cfg);
+            let dot = t.cos();
+            assert_eq!(got.is_empty(), dot < cfg.min_normal_dot, "θ = {deg}°: dot {dot:.3}, got {got:?}");
+            assert_eq!(got.is_empty(), deg > 155.0, "θ = {deg}°");
+            validate(&mesh).unwrap();
+        }
     }
 
     /// Session 23's `lone_min_prob`: a 3 × 3 hole whose pool holds only the middle face of

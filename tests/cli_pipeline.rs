@@ -446,6 +446,7 @@ fn refine_trains_rounds_that_reconstruct_reads() {
         &["--rescue-min-prob", "0.3"],
         &["--no-close"],
         &["--no-untangle"],
+        &["--no-unfold"],
     ] {
         let args = [&["reconstruct", &cloud, "-o", &never_obj, "--no-postprocess"][..], opt].concat();
         let err = fails(&args, 2);

@@ -51,6 +51,9 @@ OPTIONS:
                           --rescue-min-prob, 0 <= P <= 1 (session 23 experiment;
                           default: never)
     --no-rescue           do not rescue candidates at holes
+    --no-unfold           keep predicted faces folded back over a neighbour (default:
+                          of each edge whose two quads' normals have a dot under
+                          -0.95, the less probable face is taken out after insertion)
     --no-close            leave odd loops and loops the hole filling could not close
                           open (default: pair odd loops through the faces between
                           them, quadrangulate loops of at most 40 edges; implies
@@ -89,6 +92,7 @@ const SPEC: Spec = Spec {
     switches: &[
         "--no-postprocess",
         "--no-rescue",
+        "--no-unfold",
         "--no-close",
         "--no-seal",
         "--no-inverted-fills",
@@ -171,7 +175,8 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     if !cfg.run_postprocess {
         let valued = ["--max-floater-faces", "--rescue-min-prob", "--rescue-lone"];
-        let switches = ["--no-rescue", "--no-close", "--no-seal", "--no-inverted-fills", "--no-untangle"];
+        let switches =
+            ["--no-rescue", "--no-unfold", "--no-close", "--no-seal", "--no-inverted-fills", "--no-untangle"];
         let given = valued.iter().find(|o| a.value(o).is_some()).or(switches.iter().find(|o| a.switch(o)));
         if let Some(opt) = given {
             return Err(Error::Usage(format!(
@@ -183,6 +188,9 @@ pub fn run(argv: &[String]) -> Result<()> {
     if a.value("--rescue-lone").is_some() {
         pp.rescue.lone_min_prob =
             Some(a.parsed_in(cmd, "--rescue-lone", 0.5f32, 0.0, 1.0, "it is a probability")?);
+    }
+    if a.switch("--no-unfold") {
+        pp.unfold_min_dot = f64::NEG_INFINITY;
     }
     pp.close.enabled = !a.switch("--no-close");
     pp.close.seal = !a.switch("--no-seal");
@@ -256,13 +264,14 @@ pub fn run(argv: &[String]) -> Result<()> {
     let (filled, refused) = (pp.hole_fill.quads_added(), pp.refused_on_insertion + pp.removed_by_score);
     // Through `output::stderr`: `eprintln!` panics when stderr is a closed pipe.
     crate::output::stderr(&format!(
-        "reconstruct: {} points, {} candidates, {} predicted real, {} faces kept ({} removed/refused), {} floater faces removed, {} candidates rescued at holes, {} hole quads filled ({} new vertices), {} loops closed ({} quads, {} faces taken out), {} loops sealed ({} faces replaced by {}), {} badly shaped faces re-split -> {}\n",
+        "reconstruct: {} points, {} candidates, {} predicted real, {} faces kept ({} removed/refused), {} floater faces removed, {} folded faces taken out, {} candidates rescued at holes, {} hole quads filled ({} new vertices), {} loops closed ({} quads, {} faces taken out), {} loops sealed ({} faces replaced by {}), {} badly shaped faces re-split -> {}\n",
         rep.points,
         rep.candidates,
         rep.predicted,
         rep.faces,
         refused,
         pp.floater_faces_removed,
+        pp.unfolded,
         pp.rescued,
         filled,
         rep.vertices_added,

@@ -43,9 +43,9 @@ pub struct RescueConfig {
     /// 24: a quad glued on two border edges of a flat patch could lie folded back over
     /// the patch's own faces). −0.9: folded back to within ≈ 25° of the face. Not the
     /// hole filling's and the closing's −0.3 (a dihedral sharper than ≈ 73°): real
-    /// surfaces have such creases (thin shells' rims, knife edges; 636 edges of the
+    /// surfaces have such creases (thin shells' rims, knife edges; 705 edges of the
     /// training set's organic and thin meshes), and that bound refused their true faces
-    /// (session 25), while they almost never fold back so far (none under −0.95).
+    /// (session 25), while they almost never fold back so far (1 under −0.95).
     pub min_normal_dot: f64,
 }
 

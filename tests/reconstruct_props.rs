@@ -240,13 +240,19 @@ fn degenerate_clouds_never_panic() {
 /// must be the unit cloud's, scaled.
 #[test]
 fn extreme_power_of_two_scales_give_identical_faces() {
-    let pts = cloud(0, 3);
     let cfg = ReconstructConfig { threshold: 0.3, ..Default::default() };
-    let a = reconstruct(&pts, model(), &cfg).expect("reconstruct");
+    // The first of these clouds for which the (untrained) model makes the hole filling
+    // add vertices, so that their mapping back to the input's frame is checked below
+    // (cloud(0, 3) did until session 25's unfold changed the holes).
+    let (pts, a) = (0..4u8)
+        .flat_map(|kind| (0..8u64).map(move |seed| cloud(kind, seed)))
+        .map(|pts| {
+            let a = reconstruct(&pts, model(), &cfg).expect("reconstruct");
+            (pts, a)
+        })
+        .find(|(pts, a)| a.vertices.len() > pts.len())
+        .expect("no cloud where the hole filling adds a vertex: the check below would be vacuous");
     assert!(!a.quads.is_empty());
-    // This cloud and model make the hole filling add vertices (6), so their mapping
-    // back to the input's frame is checked below.
-    assert!(a.vertices.len() > pts.len(), "no vertex added: the check below would be vacuous");
     for e in [-1000, -700, 700, 1000] {
         let k = 2f64.powi(e);
         let scaled: Vec<[f64; 3]> = pts.iter().map(|p| p.map(|c| c * k)).collect();

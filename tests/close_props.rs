@@ -662,3 +662,95 @@ proptest! {
         }
     }
 }
+
+/// Folded edges of `mesh`: interior edges whose two quads' normals (cross product of the
+/// diagonals, normalised) have a dot under `bound`, as (less probable face, other face).
+fn folded_edges(mesh: &HalfedgeMesh, pos: &[[f64; 3]], probs: &[f32], bound: f64) -> Vec<(FaceId, FaceId)> {
+    let normal = |f: FaceId| {
+        let p = mesh.face_vertices(f).map(|v| pos[v.idx()]);
+        let (a, b) = (
+            [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]],
+            [p[3][0] - p[1][0], p[3][1] - p[1][1], p[3][2] - p[1][2]],
+        );
+        let c = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+        let n = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+        c.map(|x| x / n)
+    };
+    let mut out = Vec::new();
+    for f in mesh.faces() {
+        for h in mesh.face_halfedges(f) {
+            if let Some(g) = mesh.face(h.opposite()) {
+                let (nf, ng) = (normal(f), normal(g));
+                if f.idx() < g.idx() && nf[0] * ng[0] + nf[1] * ng[1] + nf[2] * ng[2] < bound {
+                    let f_loses = (probs[f.idx()], g.idx()) < (probs[g.idx()], f.idx());
+                    out.push(if f_loses { (f, g) } else { (g, f) });
+                }
+            }
+        }
+    }
+    out
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// Session 25's unfold on a flat grid with flaps hinged on its bottom and top border
+    /// edges at random angles (some folded back over the grid, some creases) and random
+    /// probabilities: the mesh stays valid, only faces on a folded edge of the input go,
+    /// and every folded edge left is one whose less probable face cannot go (its removal
+    /// would split a vertex's fan), checked by trying it on a copy. (With the unfold off
+    /// the last check fails: the flaps fold.)
+    #[test]
+    fn unfold_leaves_only_folds_it_cannot_take_out(
+        nx in 2usize..6,
+        ny in 1usize..4,
+        flaps in proptest::collection::vec((any::<bool>(), 0usize..6, 0usize..7), 1..8),
+        seed in any::<u64>(),
+    ) {
+        let g = grid(nx, ny, nx as f64, ny as f64);
+        let id = |i: usize, j: usize| (j * (nx + 1) + i) as u32;
+        let mut pos = g.vertices.clone();
+        let mut quads = g.quads.clone();
+        let base = HalfedgeMesh::from_quads(pos.len(), &quads).unwrap();
+        let mut used = std::collections::HashSet::new();
+        for (top, i, angle) in flaps {
+            let i = i % nx;
+            if !used.insert((top, i)) {
+                continue;
+            }
+            let j = if top { ny } else { 0 };
+            let (a, b) = (id(i, j), id(i + 1, j));
+            let deg = [0.0f64, 60.0, 120.0, 150.0, 165.0, 172.0, 180.0][angle];
+            let t = deg.to_radians();
+            let out = if top { 1.0 } else { -1.0 };
+            let d = [0.0, out * t.cos(), t.sin()];
+            let (pa, pb) = (pos[a as usize], pos[b as usize]);
+            let (xa, xb) = (pos.len() as u32, pos.len() as u32 + 1);
+            pos.push([pa[0] + d[0], pa[1] + d[1], pa[2] + d[2]]);
+            pos.push([pb[0] + d[0], pb[1] + d[1], pb[2] + d[2]]);
+            let h = base.find_halfedge(point2quad::mesh::handles::VertexId(a), point2quad::mesh::handles::VertexId(b));
+            let grid_runs_ab = h.is_some_and(|h| base.face(h).is_some());
+            quads.push(if grid_runs_ab { [b, a, xa, xb] } else { [a, b, xb, xa] });
+        }
+        let mut mesh = HalfedgeMesh::from_quads(pos.len(), &quads).unwrap();
+        let mut rng = point2quad::rng::Rng::new(seed);
+        let probs: Vec<f32> = (0..quads.len()).map(|_| rng.uniform(0.05, 0.95) as f32).collect();
+        let before = folded_edges(&mesh, &pos, &probs, -0.95);
+        let on_fold: std::collections::HashSet<usize> =
+            before.iter().flat_map(|&(l, o)| [l.idx(), o.idx()]).collect();
+        let alive0: Vec<usize> = mesh.faces().map(|f| f.idx()).collect();
+        let n = point2quad::mesh::postprocess::unfold(&mut mesh, &pos, &probs, -0.95);
+        validate(&mesh).unwrap();
+        let alive1: std::collections::HashSet<usize> = mesh.faces().map(|f| f.idx()).collect();
+        let gone: Vec<usize> = alive0.iter().copied().filter(|f| !alive1.contains(f)).collect();
+        prop_assert_eq!(gone.len(), n);
+        prop_assert!(n <= before.len(), "{} removed for {} folded edges", n, before.len());
+        for f in &gone {
+            prop_assert!(on_fold.contains(f), "face {} was on no folded edge", f);
+        }
+        for (loser, _) in folded_edges(&mesh, &pos, &probs, -0.95) {
+            let mut copy = mesh.clone();
+            prop_assert!(copy.remove_face(loser).is_err(), "a fold left whose face {} could go", loser.idx());
+        }
+    }
+}

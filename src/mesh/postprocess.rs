@@ -129,6 +129,10 @@ pub struct PostprocessReport {
 /// index), lowest probability first, in passes until no such edge is left or no face
 /// can go. A removal that would split a vertex's fan is skipped (the mesh stays
 /// manifold); faces without a normal are never judged. Returns how many faces went.
+///
+/// # Panics
+/// If `prob` is shorter than the mesh's face capacity or a face's vertex has no
+/// position in `pos`.
 pub fn unfold(mesh: &mut HalfedgeMesh, pos: &[[f64; 3]], prob: &[f32], min_dot: f64) -> usize {
     let normal = |mesh: &HalfedgeMesh, f: FaceId| quad_normal(&mesh.face_vertices(f).map(|v| pos[v.idx()]));
     // Whether `f` is the less probable face of one of its folded edges.

@@ -128,7 +128,8 @@ pub struct PostprocessReport {
 /// dot under `min_dot`, the less probable face (`prob` by face index; ties: the higher
 /// index), lowest probability first, in passes until no such edge is left or no face
 /// can go. A removal that would split a vertex's fan is skipped (the mesh stays
-/// manifold); faces without a normal are never judged. Returns how many faces went.
+/// manifold); when no less probable face can go, the more probable face of a fold goes
+/// where it can. Faces without a normal are never judged. Returns how many faces went.
 ///
 /// # Panics
 /// If `prob` is shorter than the mesh's face capacity or a face's vertex has no
@@ -136,15 +137,18 @@ pub struct PostprocessReport {
 pub fn unfold(mesh: &mut HalfedgeMesh, pos: &[[f64; 3]], prob: &[f32], min_dot: f64) -> usize {
     let normal = |mesh: &HalfedgeMesh, f: FaceId| quad_normal(&mesh.face_vertices(f).map(|v| pos[v.idx()]));
     // Whether `f` is the less probable face of one of its folded edges.
-    let loses = |mesh: &HalfedgeMesh, f: FaceId| -> bool {
+    // Whether `f` is the less probable (`less`) or the more probable (`!less`) face of
+    // one of its folded edges.
+    let on_fold = |mesh: &HalfedgeMesh, f: FaceId, less: bool| -> bool {
         let Some(nf) = normal(mesh, f) else { return false };
         mesh.face_halfedges(f).iter().any(|h| {
             mesh.face(h.opposite()).is_some_and(|g| {
                 normal(mesh, g).is_some_and(|ng| dot(nf, ng) < min_dot)
-                    && (prob[f.idx()], g.idx()) < (prob[g.idx()], f.idx())
+                    && ((prob[f.idx()], g.idx()) < (prob[g.idx()], f.idx())) == less
             })
         })
     };
+    let loses = |mesh: &HalfedgeMesh, f: FaceId| on_fold(mesh, f, true);
     let mut removed = 0;
     loop {
         let mut victims: Vec<FaceId> = mesh.faces().filter(|&f| loses(mesh, f)).collect();
@@ -158,6 +162,18 @@ pub fn unfold(mesh: &mut HalfedgeMesh, pos: &[[f64; 3]], prob: &[f32], min_dot: 
             if mesh.is_face_alive(v) && loses(mesh, v) && mesh.remove_face(v).is_ok() {
                 removed += 1;
                 changed = true;
+            }
+        }
+        if !changed {
+            // No fold's less probable face can go (each would split a vertex's fan):
+            // the more probable face of a fold goes where it can instead (session 25).
+            let mut winners: Vec<FaceId> = mesh.faces().filter(|&f| on_fold(mesh, f, false)).collect();
+            winners.sort_by(|a, b| prob[a.idx()].total_cmp(&prob[b.idx()]).then(b.idx().cmp(&a.idx())));
+            for w in winners {
+                if mesh.is_face_alive(w) && on_fold(mesh, w, false) && mesh.remove_face(w).is_ok() {
+                    removed += 1;
+                    changed = true;
+                }
             }
         }
         if !changed {

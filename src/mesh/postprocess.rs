@@ -60,7 +60,7 @@ pub struct PostprocessConfig {
     pub hole_fill: HoleFillConfig,
     /// After step (b) and the floater removal, faces folded back over a neighbour are
     /// taken out ([`unfold`]): of each edge whose two quads' normals have a dot under
-    /// this, the less probable face. −0.95: folded back within ≈ 18°, which real
+    /// this, the less probable face (or the other, where that one cannot go). −0.95: folded back within ≈ 18°, which real
     /// surfaces almost never are (1 of the 705 edges under −0.3 of the training set's
     /// organic and thin meshes; session 25). `f64::NEG_INFINITY` turns it off.
     pub unfold_min_dot: f64,

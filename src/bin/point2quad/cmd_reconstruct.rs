@@ -53,7 +53,8 @@ OPTIONS:
     --no-rescue           do not rescue candidates at holes
     --no-unfold           keep predicted faces folded back over a neighbour (default:
                           of each edge whose two quads' normals have a dot under
-                          -0.95, the less probable face is taken out after insertion)
+                          -0.95, the less probable face is taken out after insertion,
+                          or the other where that one cannot go)
     --no-close            leave odd loops and loops the hole filling could not close
                           open (default: pair odd loops through the faces between
                           them, quadrangulate loops of at most 40 edges; implies

@@ -74,24 +74,23 @@ pub(crate) fn parse_off_with(bytes: &[u8], name: &str, want_faces: bool) -> Resu
             cl = l;
         }
     }
-    let all: Vec<&[u8]> = toks.collect();
-    if all.len() < 2 {
+    let counts: Vec<&[u8]> = toks.collect();
+    if counts.len() < 2 {
         return Err(Error::parse(name, cl, "expected the counts 'vertices faces [edges]'"));
     }
     // More than three numbers: the vertices were run on after the counts (a whole file
     // on one line); reported as such, not as a file truncated at vertex 0.
-    if all.len() > 3 {
+    if counts.len() > 3 {
         return Err(Error::parse(
             name,
             cl,
             format!(
                 "the counts line holds {} value(s) after 'vertices faces edges'; \
                  each vertex and each face must be on its own line",
-                all.len() - 3
+                counts.len() - 3
             ),
         ));
     }
-    let counts = all;
     let count = |t: &[u8], what: &str| -> Result<usize> {
         match parse_i64(t).and_then(|v| usize::try_from(v).ok()) {
             Some(v) => Ok(v),

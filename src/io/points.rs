@@ -93,8 +93,10 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
     let mut points = Vec::with_capacity(bytes.len() / 24);
     let mut declared: Option<(usize, usize)> = None;
     let mut first = true;
-    // Columns of x, y and z: the first three, or those a header names so.
+    // Columns of x, y and z: the first three, or those a header names so; `upto`: how
+    // many leading values give the coordinates (at least 3).
     let mut columns = [0usize, 1, 2];
+    let mut upto = 3;
     for (ln, raw) in Lines::new(bytes) {
         let mut toks = Tokens::with_commas(raw);
         let Some(t0) = toks.next() else { continue };
@@ -102,6 +104,7 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
             first = false;
             if is_column_header(raw) {
                 columns = header_columns(raw).map_err(|m| Error::parse(name, ln, m))?;
+                upto = columns.iter().max().map_or(3, |&c| (c + 1).max(3));
                 continue;
             }
             if toks.clone().next().is_none() {
@@ -122,9 +125,6 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
             }
         }
         let i = points.len();
-        // The values that give the coordinates: the first three, or up to the last
-        // column the header names.
-        let upto = columns.iter().max().map_or(3, |&c| (c + 1).max(3));
         if let Some(data) = decimal_comma_line(raw, upto) {
             return Err(Error::parse(
                 name,
@@ -182,10 +182,7 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
 /// every comma, each trimmed, when it holds one (so an empty field keeps its place),
 /// else at runs of whitespace.
 fn fields(line: &[u8]) -> Vec<&[u8]> {
-    let data = match text::find_byte(line, b'#') {
-        Some(i) => &line[..i],
-        None => line,
-    };
+    let data = without_comment(line);
     if text::find_byte(data, b',').is_some() {
         data.split(|&b| b == b',').map(trim_space).collect()
     } else {
@@ -203,10 +200,7 @@ fn fields(line: &[u8]) -> Vec<&[u8]> {
 /// CSV, with or without spaces after the commas (`1.0, 2.0, 3.0`), never mixes them.
 fn decimal_comma_line(line: &[u8], upto: usize) -> Option<&[u8]> {
     text::find_byte(line, b',')?;
-    let data = match text::find_byte(line, b'#') {
-        Some(i) => &line[..i],
-        None => line,
-    };
+    let data = without_comment(line);
     text::find_byte(data, b',')?;
     // Only the values that give the coordinates count: extra columns are ignored, so a
     // CSV's fourth field may hold spaces (`1,2,3,red car`), and a whitespace-separated
@@ -234,6 +228,14 @@ fn decimal_comma_line(line: &[u8], upto: usize) -> Option<&[u8]> {
         && words.iter().all(as_decimal)
         && words.iter().any(decimal_word);
     ((mixed && !coords_before_commas) || glued_commas).then(|| trim_space(data))
+}
+
+/// `line` up to its `#` comment.
+fn without_comment(line: &[u8]) -> &[u8] {
+    match text::find_byte(line, b'#') {
+        Some(i) => &line[..i],
+        None => line,
+    }
 }
 
 /// `f` without leading and trailing whitespace.

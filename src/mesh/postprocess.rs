@@ -60,9 +60,10 @@ pub struct PostprocessConfig {
     pub hole_fill: HoleFillConfig,
     /// After step (b) and the floater removal, faces folded back over a neighbour are
     /// taken out ([`unfold`]): of each edge whose two quads' normals have a dot under
-    /// this, the less probable face (or the other, where that one cannot go). −0.95: folded back within ≈ 18°, which real
-    /// surfaces almost never are (1 of the 705 edges under −0.3 of the training set's
-    /// organic and thin meshes; session 25). `f64::NEG_INFINITY` turns it off.
+    /// this, the less probable face (or the other, where that one cannot go). −0.95:
+    /// folded back within ≈ 18°, which real surfaces almost never are (1 of the 705 edges
+    /// under −0.3 of the training set's organic and thin meshes; session 25).
+    /// `f64::NEG_INFINITY` turns it off.
     pub unfold_min_dot: f64,
 }
 
@@ -136,7 +137,6 @@ pub struct PostprocessReport {
 /// position in `pos`.
 pub fn unfold(mesh: &mut HalfedgeMesh, pos: &[[f64; 3]], prob: &[f32], min_dot: f64) -> usize {
     let normal = |mesh: &HalfedgeMesh, f: FaceId| quad_normal(&mesh.face_vertices(f).map(|v| pos[v.idx()]));
-    // Whether `f` is the less probable face of one of its folded edges.
     // Whether `f` is the less probable (`less`) or the more probable (`!less`) face of
     // one of its folded edges.
     let on_fold = |mesh: &HalfedgeMesh, f: FaceId, less: bool| -> bool {
@@ -148,38 +148,24 @@ pub fn unfold(mesh: &mut HalfedgeMesh, pos: &[[f64; 3]], prob: &[f32], min_dot: 
             })
         })
     };
-    let loses = |mesh: &HalfedgeMesh, f: FaceId| on_fold(mesh, f, true);
     let mut removed = 0;
-    loop {
-        let mut victims: Vec<FaceId> = mesh.faces().filter(|&f| loses(mesh, f)).collect();
-        if victims.is_empty() {
-            break;
-        }
-        victims.sort_by(|a, b| prob[a.idx()].total_cmp(&prob[b.idx()]).then(b.idx().cmp(&a.idx())));
-        let mut changed = false;
-        for v in victims {
-            // Still the loser of a folded edge: an earlier removal may have freed it.
-            if mesh.is_face_alive(v) && loses(mesh, v) && mesh.remove_face(v).is_ok() {
+    // One pass over the less probable (`less`) or the more probable faces of the folds,
+    // lowest probability first; whether any went.
+    let mut take_out = |mesh: &mut HalfedgeMesh, less: bool| {
+        let mut faces: Vec<FaceId> = mesh.faces().filter(|&f| on_fold(mesh, f, less)).collect();
+        faces.sort_by(|a, b| prob[a.idx()].total_cmp(&prob[b.idx()]).then(b.idx().cmp(&a.idx())));
+        let before = removed;
+        for f in faces {
+            // Still on a fold: an earlier removal may have freed it.
+            if mesh.is_face_alive(f) && on_fold(mesh, f, less) && mesh.remove_face(f).is_ok() {
                 removed += 1;
-                changed = true;
             }
         }
-        if !changed {
-            // No fold's less probable face can go (each would split a vertex's fan):
-            // the more probable face of a fold goes where it can instead (session 25).
-            let mut winners: Vec<FaceId> = mesh.faces().filter(|&f| on_fold(mesh, f, false)).collect();
-            winners.sort_by(|a, b| prob[a.idx()].total_cmp(&prob[b.idx()]).then(b.idx().cmp(&a.idx())));
-            for w in winners {
-                if mesh.is_face_alive(w) && on_fold(mesh, w, false) && mesh.remove_face(w).is_ok() {
-                    removed += 1;
-                    changed = true;
-                }
-            }
-        }
-        if !changed {
-            break;
-        }
-    }
+        removed > before
+    };
+    // Only when no fold's less probable face can go (each would split a vertex's fan)
+    // does the more probable face of a fold go where it can (session 25).
+    while take_out(mesh, true) || take_out(mesh, false) {}
     removed
 }
 

@@ -10,4 +10,5 @@ pub mod noise;
 pub mod normals;
 pub mod reconstruct;
 pub mod refine;
+pub mod second_pass;
 pub mod train;

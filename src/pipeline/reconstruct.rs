@@ -13,6 +13,7 @@ use crate::pipeline::candidates::{generate, CandidateConfig};
 use crate::pipeline::features::face_input;
 use crate::pipeline::frame::Frame;
 use crate::pipeline::model::Model;
+use crate::pipeline::second_pass::covered_unused;
 use crate::{Error, Result};
 
 /// Largest neighbour count that [`reconstruct`] accepts (the candidates' bound,
@@ -41,6 +42,33 @@ pub struct ReconstructConfig {
     /// (sliver edges), and merging one drops every face at the merged vertex. 0 merges
     /// exact duplicates only.
     pub merge_share: f32,
+    /// A second pass without the points the first pass's mesh says are noise
+    /// ([`SecondPass`]); `None` (the default) runs one pass.
+    pub second_pass: Option<SecondPass>,
+}
+
+/// The second pass of [`reconstruct`] (session 26): after the first pass's
+/// post-process, points no face uses that lie inside an output face
+/// ([`covered_unused`]) are taken for noise; candidates are proposed and scored again
+/// without them, the two passes' candidates are merged ([`SecondPassMode`]) and the
+/// post-process runs once more on the merged list.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SecondPass {
+    /// How far off a face's plane a point may lie and still be inside it, in units of
+    /// the face's mean edge length.
+    pub tau: f64,
+    /// How the passes' probabilities are combined.
+    pub mode: SecondPassMode,
+}
+
+/// How [`SecondPass`] combines the two passes' candidates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SecondPassMode {
+    /// The second pass's candidates and probabilities alone.
+    Replace,
+    /// Both passes' candidates (the first pass's without a noise corner); a candidate
+    /// both proposed gets the mean of its two probabilities.
+    Average,
 }
 
 impl Default for ReconstructConfig {
@@ -51,6 +79,7 @@ impl Default for ReconstructConfig {
             run_postprocess: true,
             postprocess: PostprocessConfig::default(),
             merge_share: 0.001,
+            second_pass: None,
         }
     }
 }
@@ -81,6 +110,8 @@ pub struct ReconstructReport {
     pub unresolved: usize,
     /// The first of them (input index), if any.
     pub first_unresolved: Option<usize>,
+    /// Points the second pass left out as noise (`None` without a second pass).
+    pub second_pass_dropped: Option<usize>,
     /// (stage, seconds), in pipeline order.
     pub timings: Vec<(&'static str, f64)>,
 }
@@ -151,33 +182,101 @@ pub fn reconstruct_ensemble_with_report(
     report.first_unresolved = prep.first_unresolved;
     let PreparedCloud { distinct, uniq, frame, local, .. } = prep;
     clock.lap(&mut report, "normalise");
-    let cands = generate(&local, &cfg.candidates)?;
+    let (quads, probs) = score_cloud(&local, models, cfg, &mut clock, &mut report)?;
+    let (faces, face_probs, reserve, reserve_probs) = split_at_threshold(&quads, &probs, cfg.threshold);
+    report.predicted = faces.len();
+    // Index `i` of the distinct points (or, past them, of a vertex hole filling added)
+    // → index in the output, whose vertices are the input points, then the added ones.
+    let (n, u) = (points.len(), uniq.len());
+    let to_output = |i: u32| if (i as usize) < u { distinct[i as usize] } else { (n - u) as u32 + i };
+    let mesh = if cfg.run_postprocess {
+        // The post-process runs in the normalised frame (in f64): in the input's own
+        // coordinates its squared lengths and areas overflow at 1e200 and vanish at
+        // 1e-200. Its thresholds are angles and ratios, so only the vertices the hole
+        // filling adds need mapping back; the input's own are written back as given.
+        let local64: Vec<[f64; 3]> = uniq.iter().map(|&p| frame.to_local_f64(p)).collect();
+        let (mut mesh, mut pp) = postprocess_with_reserve(
+            &local64,
+            &faces,
+            &face_probs,
+            &reserve,
+            &reserve_probs,
+            &cfg.postprocess,
+        )?;
+        if let Some(sp) = &cfg.second_pass {
+            clock.lap(&mut report, "postprocess");
+            let noise = covered_unused(&mesh.vertices, u, &mesh.quads, sp.tau);
+            let kept: Vec<u32> = (0..u as u32).filter(|&i| !noise[i as usize]).collect();
+            report.second_pass_dropped = Some(u - kept.len());
+            if kept.len() < u && kept.len() >= 4 {
+                let local2: Vec<[f32; 3]> = kept.iter().map(|&i| local[i as usize]).collect();
+                let mut report2 = ReconstructReport::default();
+                let (q2, p2) = score_cloud(&local2, models, cfg, &mut clock, &mut report2)?;
+                let q2: Vec<[u32; 4]> = q2.iter().map(|q| q.map(|v| kept[v as usize])).collect();
+                let (quads, probs) = merge_passes(&quads, &probs, &noise, &q2, &p2, sp.mode);
+                let (faces, face_probs, reserve, reserve_probs) =
+                    split_at_threshold(&quads, &probs, cfg.threshold);
+                report.predicted = faces.len();
+                clock.record(&mut report, "second pass", report2.timings.iter().map(|t| t.1).sum::<f64>());
+                (mesh, pp) = postprocess_with_reserve(
+                    &local64,
+                    &faces,
+                    &face_probs,
+                    &reserve,
+                    &reserve_probs,
+                    &cfg.postprocess,
+                )?;
+            }
+        }
+        report.vertices_added = mesh.vertices.len() - u;
+        report.postprocess = Some(pp);
+        let mut vertices = points.to_vec();
+        vertices.extend(mesh.vertices[u..].iter().map(|&p| frame.to_world_f64(p)));
+        QuadMesh { vertices, quads: mesh.quads.iter().map(|q| q.map(to_output)).collect() }
+    } else {
+        QuadMesh { vertices: points.to_vec(), quads: faces.iter().map(|q| q.map(to_output)).collect() }
+    };
+    report.faces = mesh.quads.len();
+    clock.lap(&mut report, "postprocess");
+    Ok((mesh, report))
+}
+
+/// Candidates of a normalised cloud and their probabilities (the members' mean):
+/// candidates, features, classification and refinement rounds, timed into `report`.
+fn score_cloud(
+    local: &[[f32; 3]],
+    models: &[&Model],
+    cfg: &ReconstructConfig,
+    clock: &mut Clock,
+    report: &mut ReconstructReport,
+) -> Result<(Vec<[u32; 4]>, Vec<f32>)> {
+    let cands = generate(local, &cfg.candidates)?;
     report.candidates = cands.len();
-    clock.lap(&mut report, "candidates");
+    clock.lap(report, "candidates");
     // The face input depends on the model only through `use_context`: built once
     // per value the members need.
     let mut inputs: [Option<Vec<f32>>; 2] = [None, None];
     for m in models {
         let ctx = m.config().use_context;
         if inputs[ctx as usize].is_none() {
-            inputs[ctx as usize] = Some(face_input(&local, &cands, ctx));
+            inputs[ctx as usize] = Some(face_input(local, &cands, ctx));
         }
     }
-    clock.lap(&mut report, "features");
+    clock.lap(report, "features");
     let (mut t_classify, mut t_refine) = (0.0, None);
     let mut probs: Vec<f32> = Vec::new();
     for (k, model) in models.iter().enumerate() {
         let x = inputs[model.config().use_context as usize].as_deref().unwrap_or_default();
         // The point encoder (if the model has one) reads the same normalised cloud the
         // candidates were built in, as in training.
-        let base = model.predict_base(&local, &cands.quads, x)?;
+        let base = model.predict_base(local, &cands.quads, x)?;
         check_probabilities(k, &base)?;
         t_classify += clock.split();
         // Refinement rounds (when the model has them) rescore every candidate by its
         // rivals and neighbours: the same as `predict_with_points`, timed apart.
         let p = match model.refiner() {
             Some(r) => {
-                let p = r.apply(&model.params, &local, &cands.quads, &base)?;
+                let p = r.apply(&model.params, local, &cands.quads, &base)?;
                 *t_refine.get_or_insert(0.0) += clock.split();
                 check_probabilities(k, &p)?;
                 p
@@ -194,17 +293,25 @@ pub fn reconstruct_ensemble_with_report(
         let inv = 1.0 / models.len() as f32;
         probs.iter_mut().for_each(|a| *a *= inv);
     }
-    clock.record(&mut report, "classify", t_classify);
+    clock.record(report, "classify", t_classify);
     if let Some(t) = t_refine {
-        clock.record(&mut report, "refine", t);
+        clock.record(report, "refine", t);
     }
-    let mut faces = Vec::new();
-    let mut face_probs = Vec::new();
-    // The rest of the candidates: the post-process may rescue them at holes.
-    let mut reserve = Vec::new();
-    let mut reserve_probs = Vec::new();
-    for (q, &p) in cands.quads.iter().zip(&probs) {
-        if p > cfg.threshold {
+    Ok((cands.quads, probs))
+}
+
+/// Candidates above `threshold` (with their probabilities), then the rest (the
+/// reserve the post-process may rescue at holes).
+#[allow(clippy::type_complexity)]
+fn split_at_threshold(
+    quads: &[[u32; 4]],
+    probs: &[f32],
+    threshold: f32,
+) -> (Vec<[u32; 4]>, Vec<f32>, Vec<[u32; 4]>, Vec<f32>) {
+    let (mut faces, mut face_probs, mut reserve, mut reserve_probs) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (q, &p) in quads.iter().zip(probs) {
+        if p > threshold {
             faces.push(*q);
             face_probs.push(p);
         } else {
@@ -212,36 +319,62 @@ pub fn reconstruct_ensemble_with_report(
             reserve_probs.push(p);
         }
     }
-    report.predicted = faces.len();
-    // Index `i` of the distinct points (or, past them, of a vertex hole filling added)
-    // → index in the output, whose vertices are the input points, then the added ones.
-    let (n, u) = (points.len(), uniq.len());
-    let to_output = |i: u32| if (i as usize) < u { distinct[i as usize] } else { (n - u) as u32 + i };
-    let mesh = if cfg.run_postprocess {
-        // The post-process runs in the normalised frame (in f64): in the input's own
-        // coordinates its squared lengths and areas overflow at 1e200 and vanish at
-        // 1e-200. Its thresholds are angles and ratios, so only the vertices the hole
-        // filling adds need mapping back; the input's own are written back as given.
-        let local64: Vec<[f64; 3]> = uniq.iter().map(|&p| frame.to_local_f64(p)).collect();
-        let (mesh, pp) = postprocess_with_reserve(
-            &local64,
-            &faces,
-            &face_probs,
-            &reserve,
-            &reserve_probs,
-            &cfg.postprocess,
-        )?;
-        report.vertices_added = mesh.vertices.len() - u;
-        report.postprocess = Some(pp);
-        let mut vertices = points.to_vec();
-        vertices.extend(mesh.vertices[u..].iter().map(|&p| frame.to_world_f64(p)));
-        QuadMesh { vertices, quads: mesh.quads.iter().map(|q| q.map(to_output)).collect() }
-    } else {
-        QuadMesh { vertices: points.to_vec(), quads: faces.iter().map(|q| q.map(to_output)).collect() }
+    (faces, face_probs, reserve, reserve_probs)
+}
+
+/// The candidates of the two passes as one list. First-pass candidates with a corner
+/// taken for noise go; a vertex set both passes proposed keeps the first pass's cyclic
+/// order and gets the second pass's probability ([`SecondPassMode::Replace`]) or the
+/// mean of both ([`SecondPassMode::Average`]); one only a pass proposed keeps that
+/// pass's probability under `Average`, and under `Replace` only the second pass's
+/// candidates are kept.
+fn merge_passes(
+    q1: &[[u32; 4]],
+    p1: &[f32],
+    noise: &[bool],
+    q2: &[[u32; 4]],
+    p2: &[f32],
+    mode: SecondPassMode,
+) -> (Vec<[u32; 4]>, Vec<f32>) {
+    let key = |q: &[u32; 4]| {
+        let mut k = *q;
+        k.sort_unstable();
+        k
     };
-    report.faces = mesh.quads.len();
-    clock.lap(&mut report, "postprocess");
-    Ok((mesh, report))
+    let first: std::collections::HashMap<[u32; 4], usize> = q1
+        .iter()
+        .enumerate()
+        .filter(|(_, q)| q.iter().all(|&v| !noise.get(v as usize).copied().unwrap_or(false)))
+        .map(|(i, q)| (key(q), i))
+        .collect();
+    let mut quads = Vec::with_capacity(q2.len() + first.len());
+    let mut probs = Vec::with_capacity(q2.len() + first.len());
+    let mut taken = vec![false; q1.len()];
+    for (q, &p) in q2.iter().zip(p2) {
+        match first.get(&key(q)) {
+            Some(&i) => {
+                taken[i] = true;
+                quads.push(q1[i]);
+                probs.push(match mode {
+                    SecondPassMode::Replace => p,
+                    SecondPassMode::Average => 0.5 * (p + p1[i]),
+                });
+            }
+            None => {
+                quads.push(*q);
+                probs.push(p);
+            }
+        }
+    }
+    if mode == SecondPassMode::Average {
+        let mut rest: Vec<usize> = first.values().copied().filter(|&i| !taken[i]).collect();
+        rest.sort_unstable();
+        for i in rest {
+            quads.push(q1[i]);
+            probs.push(p1[i]);
+        }
+    }
+    (quads, probs)
 }
 
 /// A cloud made ready for the pipeline by [`prepare_cloud`].

@@ -7,7 +7,9 @@ use point2quad::io::mesh_io::{prepare_mesh_with, WriteOptions};
 use point2quad::io::points::read_points;
 use point2quad::mesh::poly::PolyMesh;
 use point2quad::pipeline::model::Model;
-use point2quad::pipeline::reconstruct::{reconstruct_ensemble_with_report, ReconstructConfig};
+use point2quad::pipeline::reconstruct::{
+    reconstruct_ensemble_with_report, ReconstructConfig, SecondPass, SecondPassMode,
+};
 use point2quad::{Error, Result};
 use std::path::{Path, PathBuf};
 
@@ -89,6 +91,8 @@ const SPEC: Spec = Spec {
         "--rescue-min-prob",
         "--rescue-lone",
         "--merge-share",
+        "--second-pass",
+        "--second-pass-tau",
     ],
     switches: &[
         "--no-postprocess",
@@ -207,6 +211,21 @@ pub fn run(argv: &[String]) -> Result<()> {
         0.5,
         "a share of the 8th-neighbour distance",
     )?;
+    if let Some(mode) = a.value("--second-pass") {
+        let mode = match mode {
+            "replace" => SecondPassMode::Replace,
+            "average" => SecondPassMode::Average,
+            _ => {
+                return Err(Error::Usage(format!(
+                    "{cmd}: --second-pass {}: expected replace or average (see `point2quad {cmd} --help`)",
+                    mode.escape_debug()
+                )))
+            }
+        };
+        let tau =
+            a.parsed_in(cmd, "--second-pass-tau", 0.25f64, 0.0, 10.0, "a share of a face's edge length")?;
+        cfg.second_pass = Some(SecondPass { tau, mode });
+    }
     // Check the output names before the work, not after it.
     point2quad::io::mesh_io::MeshFormat::from_path(&out)?;
     let svg = a.value("--svg").map(Path::new);

@@ -654,6 +654,25 @@ mod tests {
     use crate::mesh::shapes;
     use crate::pipeline::model::ModelConfig;
 
+    /// The merge of the two passes, against its definition written out per case.
+    #[test]
+    fn the_passes_merge_by_vertex_set() {
+        // First pass: A, B (corner 9 is noise), C; second pass: A (another cyclic
+        // order), D.
+        let q1 = [[0, 1, 2, 3], [1, 9, 4, 5], [2, 3, 6, 7]];
+        let p1 = [0.8, 0.9, 0.2];
+        let mut noise = vec![false; 10];
+        noise[9] = true;
+        let q2 = [[1, 2, 3, 0], [4, 5, 6, 7]];
+        let p2 = [0.4, 0.7];
+        let (q, p) = merge_passes(&q1, &p1, &noise, &q2, &p2, SecondPassMode::Average);
+        assert_eq!(q, vec![[0, 1, 2, 3], [4, 5, 6, 7], [2, 3, 6, 7]]);
+        assert!((p[0] - 0.6).abs() < 1e-6 && p[1] == 0.7 && p[2] == 0.2, "{p:?}");
+        let (q, p) = merge_passes(&q1, &p1, &noise, &q2, &p2, SecondPassMode::Replace);
+        assert_eq!(q, vec![[0, 1, 2, 3], [4, 5, 6, 7]]);
+        assert_eq!(p, vec![0.4, 0.7]);
+    }
+
     #[test]
     fn distinct_points_keeps_first_occurrences_in_order() {
         let p = [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [-0.0, 0.0, -0.0], [2.0, 0.0, 0.0]];

@@ -61,17 +61,25 @@ impl FacePlane {
         let normal = n.map(|x| x / len);
         let edge = (0..4).map(|k| dist(c[k], c[(k + 1) % 4])).sum::<f64>() / 4.0;
         let slack = tau * edge;
-        let mut lo = c[0];
-        let mut hi = c[0];
-        for p in &c[1..] {
-            for a in 0..3 {
-                lo[a] = lo[a].min(p[a]);
-                hi[a] = hi[a].max(p[a]);
+        // The region a contained point lies in: the quad projected onto its plane
+        // (through the first corner), thickened by the slack both ways along the
+        // normal. Its box is that of those eight points, grown by a rounding margin.
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for p in &c {
+            let h = dot(sub(*p, c[0]), normal);
+            for t in [-slack, slack] {
+                for a in 0..3 {
+                    let x = p[a] + (t - h) * normal[a];
+                    lo[a] = lo[a].min(x);
+                    hi[a] = hi[a].max(x);
+                }
             }
         }
+        let margin = 1e-9 * (0..3).map(|a| hi[a] - lo[a]).fold(edge, f64::max);
         for a in 0..3 {
-            lo[a] -= slack;
-            hi[a] += slack;
+            lo[a] -= margin;
+            hi[a] += margin;
         }
         Some(FacePlane { corners: c, normal, slack, lo, hi })
     }

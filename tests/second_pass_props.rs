@@ -1,0 +1,190 @@
+//! The second pass (`ReconstructConfig::second_pass`, session 26): which points the
+//! first pass's mesh calls noise, against a brute-force reference, and the second
+//! pass's output through the library API.
+
+use point2quad::mesh::halfedge::HalfedgeMesh;
+use point2quad::mesh::validate::validate;
+use point2quad::pipeline::model::Model;
+use point2quad::pipeline::reconstruct::{
+    reconstruct, reconstruct_with_report, ReconstructConfig, SecondPass, SecondPassMode,
+};
+use point2quad::pipeline::second_pass::covered_unused;
+use point2quad::rng::Rng;
+use proptest::prelude::*;
+use std::sync::OnceLock;
+
+fn shipped() -> &'static Model {
+    static M: OnceLock<Model> = OnceLock::new();
+    M.get_or_init(|| {
+        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/point2quad-default.p2qm");
+        Model::load(std::path::Path::new(p)).expect("test: shipped weights")
+    })
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// Reference: barycentric coordinates of the projected point in each of the quad's
+/// four corner triangles (projected onto the face's plane), every face tried (no grid).
+fn brute(pos: &[[f64; 3]], n_points: usize, quads: &[[u32; 4]], tau: f64) -> Vec<bool> {
+    let mut used = vec![false; pos.len()];
+    quads.iter().flatten().for_each(|&v| used[v as usize] = true);
+    (0..n_points)
+        .map(|i| {
+            !used[i]
+                && quads.iter().any(|q| {
+                    let c = q.map(|v| pos[v as usize]);
+                    let n = cross(sub(c[2], c[0]), sub(c[3], c[1]));
+                    let len = dot(n, n).sqrt();
+                    if len == 0.0 {
+                        return false;
+                    }
+                    let n = n.map(|x| x / len);
+                    let edge = (0..4)
+                        .map(|k| dot(sub(c[k], c[(k + 1) % 4]), sub(c[k], c[(k + 1) % 4])).sqrt())
+                        .sum::<f64>()
+                        / 4.0;
+                    let d = dot(sub(pos[i], c[0]), n);
+                    if d.abs() > tau * edge {
+                        return false;
+                    }
+                    let p = sub(pos[i], n.map(|x| x * d));
+                    [[0, 1, 2], [0, 2, 3], [0, 1, 3], [1, 2, 3]].iter().any(|t| {
+                        // The triangle as seen along the normal: its corners projected
+                        // onto the plane through the point's projection.
+                        let flat = |x: [f64; 3]| sub(x, n.map(|k| k * dot(sub(x, p), n)));
+                        let (a, b, cc) = (flat(c[t[0]]), flat(c[t[1]]), flat(c[t[2]]));
+                        let (v0, v1, v2) = (sub(b, a), sub(cc, a), sub(p, a));
+                        let (d00, d01, d11, d20, d21) =
+                            (dot(v0, v0), dot(v0, v1), dot(v1, v1), dot(v2, v0), dot(v2, v1));
+                        let den = d00 * d11 - d01 * d01;
+                        if den.abs() < 1e-12 * d00.max(d11).powi(2) {
+                            return false;
+                        }
+                        let v = (d11 * d20 - d01 * d21) / den;
+                        let w = (d00 * d21 - d01 * d20) / den;
+                        let eps = 1e-9;
+                        v >= -eps && w >= -eps && v + w <= 1.0 + eps
+                    })
+                })
+        })
+        .collect()
+}
+
+/// A bumpy grid of quads (some taken out) and loose points near it; the points on the
+/// edge of a face (within 1e-6 of the reference's decision) are left out of the
+/// comparison, where the two tests may round apart.
+fn scene(seed: u64) -> (Vec<[f64; 3]>, usize, Vec<[u32; 4]>) {
+    let mut rng = Rng::new(seed);
+    let n = 4 + (seed % 5) as usize;
+    let mut pos = Vec::new();
+    for y in 0..n {
+        for x in 0..n {
+            pos.push([
+                x as f64 + 0.3 * (rng.f64() - 0.5),
+                y as f64 + 0.3 * (rng.f64() - 0.5),
+                0.3 * rng.f64(),
+            ]);
+        }
+    }
+    let mut quads = Vec::new();
+    for y in 0..n - 1 {
+        for x in 0..n - 1 {
+            if rng.f64() < 0.8 {
+                let v = (y * n + x) as u32;
+                quads.push([v, v + 1, v + 1 + n as u32, v + n as u32]);
+            }
+        }
+    }
+    for _ in 0..60 {
+        pos.push([
+            (n as f64) * rng.f64() - 0.5,
+            (n as f64) * rng.f64() - 0.5,
+            0.15 + 0.6 * (rng.f64() - 0.5),
+        ]);
+    }
+    let np = pos.len();
+    // A vertex the hole filling added: never marked, even inside a face.
+    pos.push([0.5, 0.5, 0.1]);
+    (pos, np, quads)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    #[test]
+    fn covered_unused_equals_the_brute_force_reference(seed in 0u64..1_000_000, tau in 0.05f64..0.6) {
+        let (pos, np, quads) = scene(seed);
+        let got = covered_unused(&pos, np, &quads, tau);
+        let want = brute(&pos, np, &quads, tau);
+        prop_assert_eq!(got.len(), np);
+        // Points within a hair of a decision boundary (plane slack or a triangle's
+        // edge) may round either way: compared with a slightly narrower and a slightly
+        // wider tau, a point must agree with one of them.
+        let narrow = brute(&pos, np, &quads, tau * (1.0 - 1e-9));
+        let wide = brute(&pos, np, &quads, tau * (1.0 + 1e-9));
+        for i in 0..np {
+            if narrow[i] == wide[i] {
+                prop_assert_eq!(got[i], want[i], "point {} {:?}", i, pos[i]);
+            }
+        }
+    }
+}
+
+/// A flat grid with points near some face centres (a noise model's points): the first
+/// pass leaves them unused and inside faces, the second pass drops exactly those, and
+/// no output face uses one; the output is a valid manifold mesh whose first vertices
+/// are the input, bit for bit, in both modes.
+#[test]
+fn the_second_pass_drops_the_points_inside_faces_and_keeps_the_mesh_valid() {
+    let n = 12;
+    let mut pts = Vec::new();
+    for y in 0..n {
+        for x in 0..n {
+            pts.push([x as f64 * 0.1, y as f64 * 0.1, 0.02 * ((x * 7 + y * 3) % 5) as f64 / 5.0]);
+        }
+    }
+    let grid = pts.len();
+    let mut rng = Rng::new(3);
+    for k in 0..12 {
+        let (x, y) = (1 + (k * 5) % (n - 3), 1 + (k * 7) % (n - 3));
+        let c = |dx: usize, dy: usize| pts[(y + dy) * n + x + dx];
+        let m = [0, 1, 2].map(|a| (c(0, 0)[a] + c(1, 0)[a] + c(1, 1)[a] + c(0, 1)[a]) / 4.0);
+        pts.push([
+            m[0] + 0.02 * (rng.f64() - 0.5),
+            m[1] + 0.02 * (rng.f64() - 0.5),
+            m[2] + 0.004 * (rng.f64() - 0.5),
+        ]);
+    }
+    let one = ReconstructConfig::default();
+    let first = reconstruct(&pts, shipped(), &one).expect("first pass");
+    let mut used = vec![false; first.vertices.len()];
+    first.quads.iter().flatten().for_each(|&v| used[v as usize] = true);
+    let expect = covered_unused(&first.vertices, pts.len(), &first.quads, 0.25);
+    // The premise: the noise points are unused and inside faces after one pass.
+    assert!(expect[grid..].iter().filter(|&&e| e).count() >= 8, "{:?}", &expect[grid..]);
+    for mode in [SecondPassMode::Replace, SecondPassMode::Average] {
+        let cfg =
+            ReconstructConfig { second_pass: Some(SecondPass { tau: 0.25, mode }), ..Default::default() };
+        let (m, rep) = reconstruct_with_report(&pts, shipped(), &cfg).expect("second pass");
+        assert_eq!(rep.second_pass_dropped, Some(expect.iter().filter(|&&e| e).count()), "{mode:?}");
+        for q in &m.quads {
+            assert!(q.iter().all(|&v| !expect[v as usize]), "{mode:?}: face {q:?} uses a dropped point");
+        }
+        assert_eq!(&m.vertices[..pts.len()], &pts[..]);
+        let he = HalfedgeMesh::from_quads(m.vertices.len(), &m.quads).expect("manifold");
+        validate(&he).expect("valid");
+        // Every face of the grid is found once the noise is out.
+        assert!(m.quads.len() >= (n - 1) * (n - 1) - 2, "{mode:?}: {} faces", m.quads.len());
+    }
+    // Without a second pass the report says so.
+    let (_, rep) = reconstruct_with_report(&pts, shipped(), &one).expect("one pass");
+    assert_eq!(rep.second_pass_dropped, None);
+}

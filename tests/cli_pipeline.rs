@@ -587,6 +587,41 @@ fn reconstruct_inverted_fills_and_seal_switches() {
     assert!(b_no_seal >= b_full, "{b_no_seal} < {b_full}");
 }
 
+/// `reconstruct --second-pass` (session 26): both modes write a valid mesh, the summary
+/// names the points left out, and the option's mistakes are usage errors that write
+/// nothing (an unknown mode, a tau without a mode or out of range, either with
+/// --no-postprocess).
+#[test]
+fn reconstruct_second_pass_option() {
+    let s = Scratch::new("second_pass");
+    let cloud = s.p("cloud.xyz");
+    ok(&["synth", "--shape", "torus", "-o", &cloud, "--noise", "0.1", "--seed", "3"]);
+    for mode in ["average", "replace"] {
+        let mesh = s.p(&format!("{mode}.obj"));
+        let out =
+            ok(&["reconstruct", &cloud, "-o", &mesh, "--second-pass", mode, "--second-pass-tau", "0.3"]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("second pass:") && err.contains("left out as noise"), "{err}");
+        assert!(valid_mesh_metric(&mesh, "faces") > 0.0);
+    }
+    let one = s.p("one.obj");
+    let out = ok(&["reconstruct", &cloud, "-o", &one]);
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("second pass"));
+    let never = s.p("never.obj");
+    for (args, needle) in [
+        (&["--second-pass", "both"][..], "expected replace or average"),
+        (&["--second-pass-tau", "0.3"], "without --second-pass"),
+        (&["--second-pass", "average", "--second-pass-tau", "11"], "--second-pass-tau"),
+        (&["--second-pass", "average", "--second-pass-tau", "nan"], "--second-pass-tau"),
+        (&["--second-pass", "average", "--no-postprocess"], "no effect with --no-postprocess"),
+    ] {
+        let argv = [&["reconstruct", &cloud, "-o", &never][..], args].concat();
+        let err = fails(&argv, 2);
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+    assert!(!Path::new(&never).exists());
+}
+
 /// `train --init`: a fine-tune starts from the given weights (their config, epoch 1 of
 /// its own count); a refined model's rounds are dropped with a message; combinations with
 /// --resume or --config are usage errors, a missing file a data error naming it. And

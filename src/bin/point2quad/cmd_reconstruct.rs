@@ -75,6 +75,15 @@ OPTIONS:
                           inverted, folded) as they are (default: re-split each with
                           the faces next to it over the same vertices when that gives
                           better-shaped quads)
+    --second-pass MODE    after the post-process, take the points no face uses that
+                          lie inside a face (noise, most likely) out, propose and score
+                          the candidates again without them and post-process once
+                          more: `average` scores a candidate both passes proposed by
+                          the mean of its two probabilities, `replace` keeps the second
+                          pass's alone (session 26 experiment; about twice the time;
+                          default: one pass)
+    --second-pass-tau T   how far off a face's plane a point still lies inside it, in
+                          units of the face's mean edge length, 0 <= T <= 10 [0.25]
 ";
 
 const SPEC: Spec = Spec {
@@ -179,7 +188,13 @@ pub fn run(argv: &[String]) -> Result<()> {
         }
     }
     if !cfg.run_postprocess {
-        let valued = ["--max-floater-faces", "--rescue-min-prob", "--rescue-lone"];
+        let valued = [
+            "--max-floater-faces",
+            "--rescue-min-prob",
+            "--rescue-lone",
+            "--second-pass",
+            "--second-pass-tau",
+        ];
         let switches =
             ["--no-rescue", "--no-unfold", "--no-close", "--no-seal", "--no-inverted-fills", "--no-untangle"];
         let given = valued.iter().find(|o| a.value(o).is_some()).or(switches.iter().find(|o| a.switch(o)));
@@ -211,6 +226,11 @@ pub fn run(argv: &[String]) -> Result<()> {
         0.5,
         "a share of the 8th-neighbour distance",
     )?;
+    if a.value("--second-pass").is_none() && a.value("--second-pass-tau").is_some() {
+        return Err(Error::Usage(format!(
+            "{cmd}: --second-pass-tau has no effect without --second-pass MODE; give both or neither"
+        )));
+    }
     if let Some(mode) = a.value("--second-pass") {
         let mode = match mode {
             "replace" => SecondPassMode::Replace,
@@ -304,6 +324,12 @@ pub fn run(argv: &[String]) -> Result<()> {
         pp.close.untangled,
         out.display()
     ));
+    if let Some(d) = rep.second_pass_dropped {
+        crate::output::stderr(&format!(
+            "reconstruct: second pass: {d} point(s) no face used lay inside a face and were left out as noise{}\n",
+            if d == 0 { " (none: the first pass's mesh stands)" } else { "" }
+        ));
+    }
     hygiene_notes(
         "reconstruct",
         &input,

@@ -110,7 +110,9 @@ pub struct ReconstructReport {
     pub unresolved: usize,
     /// The first of them (input index), if any.
     pub first_unresolved: Option<usize>,
-    /// Points the second pass left out as noise (`None` without a second pass).
+    /// Points the second pass left out as noise (`None` without a second pass; 0 when
+    /// it found none, or when the points left gave the candidates nothing to work on,
+    /// and the first pass's mesh stands).
     pub second_pass_dropped: Option<usize>,
     /// (stage, seconds), in pipeline order.
     pub timings: Vec<(&'static str, f64)>,
@@ -211,21 +213,32 @@ pub fn reconstruct_ensemble_with_report(
             if kept.len() < u && kept.len() >= 4 {
                 let local2: Vec<[f32; 3]> = kept.iter().map(|&i| local[i as usize]).collect();
                 let mut report2 = ReconstructReport::default();
-                let (q2, p2) = score_cloud(&local2, models, cfg, &mut clock, &mut report2)?;
-                let q2: Vec<[u32; 4]> = q2.iter().map(|q| q.map(|v| kept[v as usize])).collect();
-                let (quads, probs) = merge_passes(&quads, &probs, &noise, &q2, &p2, sp.mode);
-                let (faces, face_probs, reserve, reserve_probs) =
-                    split_at_threshold(&quads, &probs, cfg.threshold);
-                report.predicted = faces.len();
-                clock.record(&mut report, "second pass", report2.timings.iter().map(|t| t.1).sum::<f64>());
-                (mesh, pp) = postprocess_with_reserve(
-                    &local64,
-                    &faces,
-                    &face_probs,
-                    &reserve,
-                    &reserve_probs,
-                    &cfg.postprocess,
-                )?;
+                // A cloud the first pass could work on may still leave a subset the
+                // candidates refuse (all the kept points on one line): the first
+                // pass's mesh then stands. The model's own failures are errors.
+                let second = match score_cloud(&local2, models, cfg, &mut clock, &mut report2) {
+                    Err(Error::InvalidInput(_)) => None,
+                    other => Some(other?),
+                };
+                if let Some((q2, p2)) = second {
+                    let q2: Vec<[u32; 4]> = q2.iter().map(|q| q.map(|v| kept[v as usize])).collect();
+                    let (quads, probs) = merge_passes(&quads, &probs, &noise, &q2, &p2, sp.mode);
+                    let (faces, face_probs, reserve, reserve_probs) =
+                        split_at_threshold(&quads, &probs, cfg.threshold);
+                    report.predicted = faces.len();
+                    let t: f64 = report2.timings.iter().map(|t| t.1).sum();
+                    clock.record(&mut report, "second pass", t);
+                    (mesh, pp) = postprocess_with_reserve(
+                        &local64,
+                        &faces,
+                        &face_probs,
+                        &reserve,
+                        &reserve_probs,
+                        &cfg.postprocess,
+                    )?;
+                } else {
+                    report.second_pass_dropped = Some(0);
+                }
             }
         }
         report.vertices_added = mesh.vertices.len() - u;
@@ -237,7 +250,12 @@ pub fn reconstruct_ensemble_with_report(
         QuadMesh { vertices: points.to_vec(), quads: faces.iter().map(|q| q.map(to_output)).collect() }
     };
     report.faces = mesh.quads.len();
-    clock.lap(&mut report, "postprocess");
+    let last = if report.timings.iter().any(|t| t.0 == "second pass") {
+        "second postprocess"
+    } else {
+        "postprocess"
+    };
+    clock.lap(&mut report, last);
     Ok((mesh, report))
 }
 

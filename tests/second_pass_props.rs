@@ -110,6 +110,18 @@ fn scene(seed: u64) -> (Vec<[f64; 3]>, usize, Vec<[u32; 4]>) {
             0.15 + 0.6 * (rng.f64() - 0.5),
         ]);
     }
+    // A degenerate face (four points on a line: no normal, contains nothing) and, for
+    // a third of the seeds, a face over the whole grid (too large for the grid's cells:
+    // tested apart).
+    let d = pos.len() as u32;
+    for k in 0..4 {
+        pos.push([0.2 + 0.1 * k as f64, 0.5, 0.3]);
+    }
+    quads.push([d, d + 1, d + 2, d + 3]);
+    if seed % 3 == 0 {
+        let m = n as u32;
+        quads.push([0, m - 1, m * m - 1, m * (m - 1)]);
+    }
     let np = pos.len();
     // A vertex the hole filling added: never marked, even inside a face.
     pos.push([0.5, 0.5, 0.1]);
@@ -183,6 +195,14 @@ fn the_second_pass_drops_the_points_inside_faces_and_keeps_the_mesh_valid() {
         validate(&he).expect("valid");
         // Every face of the grid is found once the noise is out.
         assert!(m.quads.len() >= (n - 1) * (n - 1) - 2, "{mode:?}: {} faces", m.quads.len());
+    }
+    // A tau the test cannot use is refused.
+    for tau in [f64::NAN, -0.1, f64::INFINITY] {
+        let cfg = ReconstructConfig {
+            second_pass: Some(SecondPass { tau, mode: SecondPassMode::Average }),
+            ..Default::default()
+        };
+        assert!(reconstruct(&pts, shipped(), &cfg).is_err(), "tau {tau}");
     }
     // Without a second pass the report says so.
     let (_, rep) = reconstruct_with_report(&pts, shipped(), &one).expect("one pass");

@@ -43,7 +43,8 @@ pub struct ReconstructConfig {
     /// exact duplicates only.
     pub merge_share: f32,
     /// A second pass without the points the first pass's mesh says are noise
-    /// ([`SecondPass`]); `None` (the default) runs one pass.
+    /// ([`SecondPass`]); `None` (the default) runs one pass. Part of the post-process:
+    /// ignored when `run_postprocess` is false.
     pub second_pass: Option<SecondPass>,
 }
 
@@ -110,9 +111,10 @@ pub struct ReconstructReport {
     pub unresolved: usize,
     /// The first of them (input index), if any.
     pub first_unresolved: Option<usize>,
-    /// Points the second pass left out as noise (`None` without a second pass; 0 when
-    /// it found none, or when the points left gave the candidates nothing to work on,
-    /// and the first pass's mesh stands).
+    /// Points the second pass left out as noise, when it ran; `None` when it did not
+    /// (not configured; no point to leave out; fewer than 4 points, or no candidate,
+    /// left): the first pass's mesh is then the output. `candidates` counts the first
+    /// pass's candidates; `predicted` those above the threshold after the merge.
     pub second_pass_dropped: Option<usize>,
     /// (stage, seconds), in pipeline order.
     pub timings: Vec<(&'static str, f64)>,
@@ -123,7 +125,8 @@ pub struct ReconstructReport {
 /// # Errors
 /// `Error::InvalidInput` for fewer than 4 (distinct) points, non-finite coordinates
 /// (naming the point), a cloud with no extent, a threshold outside [0, 1), a merge
-/// share outside [0, 0.5] or a neighbour count above [`MAX_NEIGHBOURS`]; shape errors
+/// share outside [0, 0.5], a neighbour count above [`MAX_NEIGHBOURS`] or a second
+/// pass's `tau` that is negative or not finite; shape errors
 /// if the model does not fit; `Error::Checkpoint` (path `<model K>`) when a model's
 /// probabilities are not finite.
 pub fn reconstruct(points: &[[f64; 3]], model: &Model, cfg: &ReconstructConfig) -> Result<QuadMesh> {
@@ -172,6 +175,11 @@ pub fn reconstruct_ensemble_with_report(
     if !(cfg.threshold >= 0.0 && cfg.threshold < 1.0) {
         return Err(Error::invalid(format!("threshold {} must be in [0, 1)", cfg.threshold)));
     }
+    if let Some(sp) = &cfg.second_pass {
+        if !(sp.tau >= 0.0 && sp.tau.is_finite()) {
+            return Err(Error::invalid(format!("second pass: tau {} must be finite and at least 0", sp.tau)));
+        }
+    }
     // Before any work on the cloud (the merge share is checked by `prepare_cloud`).
     crate::pipeline::candidates::check_neighbour_counts(&cfg.candidates)?;
     let mut report = ReconstructReport { points: points.len(), ..Default::default() };
@@ -209,23 +217,19 @@ pub fn reconstruct_ensemble_with_report(
             clock.lap(&mut report, "postprocess");
             let noise = covered_unused(&mesh.vertices, u, &mesh.quads, sp.tau);
             let kept: Vec<u32> = (0..u as u32).filter(|&i| !noise[i as usize]).collect();
-            report.second_pass_dropped = Some(u - kept.len());
             if kept.len() < u && kept.len() >= 4 {
                 let local2: Vec<[f32; 3]> = kept.iter().map(|&i| local[i as usize]).collect();
                 let mut report2 = ReconstructReport::default();
-                // A cloud the first pass could work on may still leave a subset the
-                // candidates refuse (all the kept points on one line): the first
-                // pass's mesh then stands. The model's own failures are errors.
-                let second = match score_cloud(&local2, models, cfg, &mut clock, &mut report2) {
-                    Err(Error::InvalidInput(_)) => None,
-                    other => Some(other?),
-                };
-                if let Some((q2, p2)) = second {
+                let (q2, p2) = score_cloud(&local2, models, cfg, &mut clock, &mut report2)?;
+                // No candidate among the points left (too few, or all on a line): the
+                // first pass's mesh stands.
+                if !q2.is_empty() {
                     let q2: Vec<[u32; 4]> = q2.iter().map(|q| q.map(|v| kept[v as usize])).collect();
                     let (quads, probs) = merge_passes(&quads, &probs, &noise, &q2, &p2, sp.mode);
                     let (faces, face_probs, reserve, reserve_probs) =
                         split_at_threshold(&quads, &probs, cfg.threshold);
                     report.predicted = faces.len();
+                    report.second_pass_dropped = Some(u - kept.len());
                     let t: f64 = report2.timings.iter().map(|t| t.1).sum();
                     clock.record(&mut report, "second pass", t);
                     (mesh, pp) = postprocess_with_reserve(
@@ -236,8 +240,6 @@ pub fn reconstruct_ensemble_with_report(
                         &reserve_probs,
                         &cfg.postprocess,
                     )?;
-                } else {
-                    report.second_pass_dropped = Some(0);
                 }
             }
         }
@@ -340,12 +342,12 @@ fn split_at_threshold(
     (faces, face_probs, reserve, reserve_probs)
 }
 
-/// The candidates of the two passes as one list. First-pass candidates with a corner
-/// taken for noise go; a vertex set both passes proposed keeps the first pass's cyclic
-/// order and gets the second pass's probability ([`SecondPassMode::Replace`]) or the
-/// mean of both ([`SecondPassMode::Average`]); one only a pass proposed keeps that
-/// pass's probability under `Average`, and under `Replace` only the second pass's
-/// candidates are kept.
+/// The candidates of the two passes as one list. Under [`SecondPassMode::Replace`],
+/// the second pass's alone. Under [`SecondPassMode::Average`], first-pass candidates
+/// with a corner taken for noise go; a vertex set both passes proposed keeps the first
+/// pass's cyclic order (each pass keeps one polygon per vertex set; on a set in convex
+/// position both find the same one) and gets the mean of its two probabilities; one
+/// only a pass proposed keeps that pass's order and probability.
 fn merge_passes(
     q1: &[[u32; 4]],
     p1: &[f32],
@@ -370,15 +372,12 @@ fn merge_passes(
     let mut taken = vec![false; q1.len()];
     for (q, &p) in q2.iter().zip(p2) {
         match first.get(&key(q)) {
-            Some(&i) => {
+            Some(&i) if mode == SecondPassMode::Average => {
                 taken[i] = true;
                 quads.push(q1[i]);
-                probs.push(match mode {
-                    SecondPassMode::Replace => p,
-                    SecondPassMode::Average => 0.5 * (p + p1[i]),
-                });
+                probs.push(0.5 * (p + p1[i]));
             }
-            None => {
+            _ => {
                 quads.push(*q);
                 probs.push(p);
             }
@@ -687,7 +686,7 @@ mod tests {
         assert_eq!(q, vec![[0, 1, 2, 3], [4, 5, 6, 7], [2, 3, 6, 7]]);
         assert!((p[0] - 0.6).abs() < 1e-6 && p[1] == 0.7 && p[2] == 0.2, "{p:?}");
         let (q, p) = merge_passes(&q1, &p1, &noise, &q2, &p2, SecondPassMode::Replace);
-        assert_eq!(q, vec![[0, 1, 2, 3], [4, 5, 6, 7]]);
+        assert_eq!(q, q2.to_vec());
         assert_eq!(p, vec![0.4, 0.7]);
     }
 

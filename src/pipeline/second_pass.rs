@@ -8,35 +8,46 @@
 //! noise points fill the k nearest neighbours the candidates are proposed from); the
 //! second pass proposes and scores the candidates again without them. Points in holes
 //! (no face over them) are kept: they may be the true vertices the first pass missed.
+//! The faces are those of the first pass's finished mesh, so a hole the post-process
+//! filled or closed covers the points in it too.
 
 use crate::math::{cross, dot};
 
 /// The points among `positions[..n_points]` that no face of `quads` uses and that lie
-/// inside some face: their projection onto the face's plane (normal: the cross product
-/// of its diagonals) falls in the quad (in one of the four triangles its two diagonals
-/// cut it into, boundary included) and their distance from that plane is at most `tau`
-/// times the face's mean edge length. Faces with a zero normal contain nothing.
-/// Positions past `n_points` (vertices the hole filling added) are never marked.
+/// inside some face: their projection onto the face's plane (the plane through its
+/// first corner whose normal is the cross product of its diagonals) falls in the convex
+/// hull of its corners projected onto that plane (the union of the four triangles of
+/// three corners each, boundary included), and their distance from that plane is at
+/// most `tau` times the face's mean edge length. Faces with a zero or non-finite normal
+/// or slack contain nothing, and so does every face for a `tau` that is negative or not
+/// finite. Positions past `n_points` (vertices the hole filling added) are never marked.
+///
+/// # Panics
+/// If a face index is out of range of `positions`.
 pub fn covered_unused(positions: &[[f64; 3]], n_points: usize, quads: &[[u32; 4]], tau: f64) -> Vec<bool> {
     let n_points = n_points.min(positions.len());
     let mut used = vec![false; positions.len()];
     for q in quads {
         q.iter().for_each(|&v| used[v as usize] = true);
     }
-    let faces: Vec<FacePlane> = quads.iter().filter_map(|q| FacePlane::new(positions, q, tau)).collect();
     let mut out = vec![false; n_points];
+    if !(tau >= 0.0 && tau.is_finite()) {
+        return out;
+    }
+    let faces: Vec<FacePlane> = quads.iter().filter_map(|q| FacePlane::new(positions, q, tau)).collect();
     if faces.is_empty() {
         return out;
     }
-    // Faces into a uniform grid of their bounding boxes (grown by the plane slack); a
-    // point is tested against the faces of its own cell.
+    // Faces into a uniform grid of their boxes; a point is tested against the faces
+    // of its own cell, and against the few faces too large for the grid.
     let grid = Grid::new(&faces);
     for (i, o) in out.iter_mut().enumerate() {
         if used[i] {
             continue;
         }
         let p = positions[i];
-        *o = grid.cell_of(p).is_some_and(|c| grid.faces_in(c).iter().any(|&f| faces[f as usize].contains(p)));
+        let in_cell = grid.cell_of(p).is_some_and(|c| grid.faces_in(c).iter().any(|&f| faces[f].contains(p)));
+        *o = in_cell || grid.big.iter().any(|&f| faces[f].contains(p));
     }
     out
 }
@@ -76,10 +87,15 @@ impl FacePlane {
                 }
             }
         }
-        let margin = 1e-9 * (0..3).map(|a| hi[a] - lo[a]).fold(edge, f64::max);
+        // Rounding: relative to the face's size and to its coordinates' magnitude.
+        let magnitude = c.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+        let margin = 1e-9 * (0..3).map(|a| hi[a] - lo[a]).fold(edge.max(magnitude), f64::max);
         for a in 0..3 {
             lo[a] -= margin;
             hi[a] += margin;
+        }
+        if !(slack.is_finite() && lo.iter().chain(&hi).all(|x| x.is_finite())) {
+            return None;
         }
         Some(FacePlane { corners: c, normal, slack, lo, hi })
     }
@@ -117,17 +133,24 @@ fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
     dot(d, d).sqrt()
 }
 
-/// A uniform grid over the faces' boxes: at most about four cells per face, each face
-/// listed in every cell its box touches.
+/// A uniform grid over the faces' boxes: about four cells per face at most, each face
+/// listed in every cell its box touches, except faces whose box touches more than
+/// [`MAX_CELLS_PER_FACE`] cells, which are kept apart (`big`) and tested for every
+/// point: at most that many entries per face in all.
 struct Grid {
     lo: [f64; 3],
     cell: f64,
     dims: [usize; 3],
-    start: Vec<u32>,
-    items: Vec<u32>,
+    start: Vec<usize>,
+    items: Vec<usize>,
+    big: Vec<usize>,
 }
 
+/// See [`Grid`].
+const MAX_CELLS_PER_FACE: usize = 64;
+
 impl Grid {
+    /// `faces` must not be empty, and their boxes finite ([`FacePlane::new`]).
     fn new(faces: &[FacePlane]) -> Grid {
         let mut lo = [f64::INFINITY; 3];
         let mut hi = [f64::NEG_INFINITY; 3];
@@ -143,10 +166,13 @@ impl Grid {
         let typical = *sizes.select_nth_unstable_by(mid, f64::total_cmp).1;
         let extent: Vec<f64> = (0..3).map(|a| (hi[a] - lo[a]).max(0.0)).collect();
         // Cells about the size of a typical face, but no more than 4 per face in all.
+        // The extents are finite, so doubling ends (a cell as large as the largest
+        // extent gives one cell).
         let budget = (4 * faces.len()).max(1) as f64;
+        let widest = extent.iter().fold(0.0f64, |m, &e| m.max(e));
         let mut cell = typical.max(f64::MIN_POSITIVE);
         let count = |cell: f64| extent.iter().map(|e| (e / cell).floor() + 1.0).product::<f64>();
-        while count(cell) > budget {
+        while count(cell) > budget && cell < widest {
             cell *= 2.0;
         }
         let dims = [0, 1, 2].map(|a| (extent[a] / cell).floor() as usize + 1);
@@ -155,39 +181,45 @@ impl Grid {
             let clamp = |x: f64| (((x - lo[a]) / cell).floor().max(0.0) as usize).min(dims[a] - 1);
             (clamp(f.lo[a]), clamp(f.hi[a]))
         };
-        let ncells = dims.iter().product::<usize>();
-        let mut count_in = vec![0u32; ncells + 1];
-        let visit = |f: &FacePlane, mut act: Box<dyn FnMut(usize) + '_>| {
+        let cells_of = |f: &FacePlane| -> Vec<usize> {
             let (x0, x1) = range(f, 0);
             let (y0, y1) = range(f, 1);
             let (z0, z1) = range(f, 2);
+            if (x1 - x0 + 1) * (y1 - y0 + 1) * (z1 - z0 + 1) > MAX_CELLS_PER_FACE {
+                return Vec::new();
+            }
+            let mut v = Vec::new();
             for z in z0..=z1 {
                 for y in y0..=y1 {
                     for x in x0..=x1 {
-                        act(index([x, y, z]));
+                        v.push(index([x, y, z]));
                     }
                 }
             }
+            v
         };
-        for f in faces {
-            visit(f, Box::new(|c| count_in[c + 1] += 1));
-        }
-        for c in 0..ncells {
-            count_in[c + 1] += count_in[c];
-        }
-        let start = count_in.clone();
-        let mut fill = count_in;
-        let mut items = vec![0u32; start[ncells] as usize];
+        let ncells = dims.iter().product::<usize>();
+        let mut pairs: Vec<(usize, usize)> = Vec::new();
+        let mut big = Vec::new();
         for (k, f) in faces.iter().enumerate() {
-            visit(
-                f,
-                Box::new(|c| {
-                    items[fill[c] as usize] = k as u32;
-                    fill[c] += 1;
-                }),
-            );
+            let cells = cells_of(f);
+            if cells.is_empty() {
+                big.push(k);
+            }
+            pairs.extend(cells.into_iter().map(|c| (c, k)));
         }
-        Grid { lo, cell, dims, start, items }
+        let mut start = vec![0usize; ncells + 1];
+        pairs.iter().for_each(|&(c, _)| start[c + 1] += 1);
+        for c in 0..ncells {
+            start[c + 1] += start[c];
+        }
+        let mut fill = start.clone();
+        let mut items = vec![0usize; pairs.len()];
+        for &(c, k) in &pairs {
+            items[fill[c]] = k;
+            fill[c] += 1;
+        }
+        Grid { lo, cell, dims, start, items, big }
     }
 
     fn cell_of(&self, p: [f64; 3]) -> Option<usize> {
@@ -202,8 +234,8 @@ impl Grid {
         Some((c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0])
     }
 
-    fn faces_in(&self, c: usize) -> &[u32] {
-        &self.items[self.start[c] as usize..self.start[c + 1] as usize]
+    fn faces_in(&self, c: usize) -> &[usize] {
+        &self.items[self.start[c]..self.start[c + 1]]
     }
 }
 

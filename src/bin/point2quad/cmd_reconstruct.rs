@@ -324,11 +324,13 @@ pub fn run(argv: &[String]) -> Result<()> {
         pp.close.untangled,
         out.display()
     ));
-    if let Some(d) = rep.second_pass_dropped {
-        crate::output::stderr(&format!(
-            "reconstruct: second pass: {d} point(s) no face used lay inside a face and were left out as noise{}\n",
-            if d == 0 { " (none: the first pass's mesh stands)" } else { "" }
-        ));
+    if cfg.second_pass.is_some() && cfg.run_postprocess {
+        crate::output::stderr(&match rep.second_pass_dropped {
+            Some(d) => format!(
+                "reconstruct: second pass: {d} point(s) no face used lay inside a face and were left out as noise\n"
+            ),
+            None => "reconstruct: second pass: nothing to leave out; the first pass's mesh stands\n".to_string(),
+        });
     }
     hygiene_notes(
         "reconstruct",

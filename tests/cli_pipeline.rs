@@ -611,6 +611,8 @@ fn reconstruct_second_pass_option() {
     for (args, needle) in [
         (&["--second-pass", "both"][..], "expected replace or average"),
         (&["--second-pass-tau", "0.3"], "without --second-pass"),
+        (&["--second-pass-cover", "all"], "without --second-pass"),
+        (&["--second-pass", "average", "--second-pass-cover", "some"], "expected all or believed"),
         (&["--second-pass", "average", "--second-pass-tau", "11"], "--second-pass-tau"),
         (&["--second-pass", "average", "--second-pass-tau", "nan"], "--second-pass-tau"),
         (&["--second-pass", "average", "--no-postprocess"], "no effect with --no-postprocess"),

@@ -6,9 +6,9 @@ use point2quad::mesh::halfedge::HalfedgeMesh;
 use point2quad::mesh::validate::validate;
 use point2quad::pipeline::model::Model;
 use point2quad::pipeline::reconstruct::{
-    reconstruct, reconstruct_with_report, ReconstructConfig, SecondPass, SecondPassMode,
+    reconstruct, reconstruct_with_report, ReconstructConfig, SecondPass, SecondPassCover, SecondPassMode,
 };
-use point2quad::pipeline::second_pass::covered_unused;
+use point2quad::pipeline::second_pass::{covered_unused, covered_unused_by};
 use point2quad::rng::Rng;
 use proptest::prelude::*;
 use std::sync::OnceLock;
@@ -34,8 +34,18 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 /// Reference: barycentric coordinates of the projected point in each of the quad's
 /// four corner triangles (projected onto the face's plane), every face tried (no grid).
 fn brute(pos: &[[f64; 3]], n_points: usize, quads: &[[u32; 4]], tau: f64) -> Vec<bool> {
+    brute_by(pos, n_points, quads, quads, tau)
+}
+
+fn brute_by(
+    pos: &[[f64; 3]],
+    n_points: usize,
+    users: &[[u32; 4]],
+    quads: &[[u32; 4]],
+    tau: f64,
+) -> Vec<bool> {
     let mut used = vec![false; pos.len()];
-    quads.iter().flatten().for_each(|&v| used[v as usize] = true);
+    users.iter().flatten().for_each(|&v| used[v as usize] = true);
     (0..n_points)
         .map(|i| {
             !used[i]
@@ -132,6 +142,21 @@ proptest! {
     #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
 
     #[test]
+    fn covered_unused_by_a_subset_equals_the_brute_force_reference(seed in 0u64..1_000_000, tau in 0.05f64..0.6) {
+        let (pos, np, quads) = scene(seed);
+        let covering: Vec<[u32; 4]> = quads.iter().copied().enumerate().filter(|(k, _)| (k * 7 + seed as usize) % 3 != 0).map(|(_, q)| q).collect();
+        let got = covered_unused_by(&pos, np, &quads, &covering, tau);
+        let want = brute_by(&pos, np, &quads, &covering, tau);
+        let narrow = brute_by(&pos, np, &quads, &covering, tau * (1.0 - 1e-9));
+        let wide = brute_by(&pos, np, &quads, &covering, tau * (1.0 + 1e-9));
+        for i in 0..np {
+            if narrow[i] == wide[i] {
+                prop_assert_eq!(got[i], want[i], "point {} {:?}", i, pos[i]);
+            }
+        }
+    }
+
+    #[test]
     fn covered_unused_equals_the_brute_force_reference(seed in 0u64..1_000_000, tau in 0.05f64..0.6) {
         let (pos, np, quads) = scene(seed);
         let got = covered_unused(&pos, np, &quads, tau);
@@ -182,13 +207,26 @@ fn the_second_pass_drops_the_points_inside_faces_and_keeps_the_mesh_valid() {
     let expect = covered_unused(&first.vertices, pts.len(), &first.quads, 0.25);
     // The premise: the noise points are unused and inside faces after one pass.
     assert!(expect[grid..].iter().filter(|&&e| e).count() >= 8, "{:?}", &expect[grid..]);
-    for mode in [SecondPassMode::Replace, SecondPassMode::Average] {
-        let cfg =
-            ReconstructConfig { second_pass: Some(SecondPass { tau: 0.25, mode }), ..Default::default() };
+    for (mode, cover) in [
+        (SecondPassMode::Replace, SecondPassCover::All),
+        (SecondPassMode::Average, SecondPassCover::All),
+        (SecondPassMode::Average, SecondPassCover::Believed),
+    ] {
+        let cfg = ReconstructConfig {
+            second_pass: Some(SecondPass { tau: 0.25, mode, cover }),
+            ..Default::default()
+        };
         let (m, rep) = reconstruct_with_report(&pts, shipped(), &cfg).expect("second pass");
-        assert_eq!(rep.second_pass_dropped, Some(expect.iter().filter(|&&e| e).count()), "{mode:?}");
-        for q in &m.quads {
-            assert!(q.iter().all(|&v| !expect[v as usize]), "{mode:?}: face {q:?} uses a dropped point");
+        let all = expect.iter().filter(|&&e| e).count();
+        if cover == SecondPassCover::All {
+            assert_eq!(rep.second_pass_dropped, Some(all), "{mode:?}");
+            for q in &m.quads {
+                assert!(q.iter().all(|&v| !expect[v as usize]), "{mode:?}: face {q:?} uses a dropped point");
+            }
+        } else {
+            // Only the believed faces cover: never more points than all faces do.
+            let d = rep.second_pass_dropped.expect("the pass ran");
+            assert!(d >= 1 && d <= all, "{d} of {all}");
         }
         assert_eq!(&m.vertices[..pts.len()], &pts[..]);
         let he = HalfedgeMesh::from_quads(m.vertices.len(), &m.quads).expect("manifold");
@@ -199,7 +237,7 @@ fn the_second_pass_drops_the_points_inside_faces_and_keeps_the_mesh_valid() {
     // A tau the test cannot use is refused.
     for tau in [f64::NAN, -0.1, f64::INFINITY] {
         let cfg = ReconstructConfig {
-            second_pass: Some(SecondPass { tau, mode: SecondPassMode::Average }),
+            second_pass: Some(SecondPass { tau, mode: SecondPassMode::Average, cover: SecondPassCover::All }),
             ..Default::default()
         };
         assert!(reconstruct(&pts, shipped(), &cfg).is_err(), "tau {tau}");

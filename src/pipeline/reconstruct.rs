@@ -13,7 +13,7 @@ use crate::pipeline::candidates::{generate, CandidateConfig};
 use crate::pipeline::features::face_input;
 use crate::pipeline::frame::Frame;
 use crate::pipeline::model::Model;
-use crate::pipeline::second_pass::covered_unused;
+use crate::pipeline::second_pass::{covered_unused, covered_unused_by};
 use crate::{Error, Result};
 
 /// Largest neighbour count that [`reconstruct`] accepts (the candidates' bound,
@@ -60,6 +60,19 @@ pub struct SecondPass {
     pub tau: f64,
     /// How the passes' probabilities are combined.
     pub mode: SecondPassMode,
+    /// Which of the first pass's faces say that a point inside them is noise.
+    pub cover: SecondPassCover,
+}
+
+/// Which faces of the first pass's mesh cover points for [`SecondPass`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SecondPassCover {
+    /// Every face of the finished mesh (hole fills, rescued and closing quads too).
+    All,
+    /// Only the faces the classifier predicted real (above the threshold): a point
+    /// under a face the post-process added to close a hole may be a true vertex the
+    /// first pass missed.
+    Believed,
 }
 
 /// How [`SecondPass`] combines the two passes' candidates.
@@ -215,7 +228,20 @@ pub fn reconstruct_ensemble_with_report(
         )?;
         if let Some(sp) = &cfg.second_pass {
             clock.lap(&mut report, "postprocess");
-            let noise = covered_unused(&mesh.vertices, u, &mesh.quads, sp.tau);
+            let noise = match sp.cover {
+                SecondPassCover::All => covered_unused(&mesh.vertices, u, &mesh.quads, sp.tau),
+                SecondPassCover::Believed => {
+                    let key = |q: &[u32; 4]| {
+                        let mut k = *q;
+                        k.sort_unstable();
+                        k
+                    };
+                    let believed: std::collections::HashSet<[u32; 4]> = faces.iter().map(key).collect();
+                    let covering: Vec<[u32; 4]> =
+                        mesh.quads.iter().copied().filter(|q| believed.contains(&key(q))).collect();
+                    covered_unused_by(&mesh.vertices, u, &mesh.quads, &covering, sp.tau)
+                }
+            };
             let kept: Vec<u32> = (0..u as u32).filter(|&i| !noise[i as usize]).collect();
             if kept.len() < u && kept.len() >= 4 {
                 let local2: Vec<[f32; 3]> = kept.iter().map(|&i| local[i as usize]).collect();

@@ -25,6 +25,22 @@ use crate::math::{cross, dot};
 /// # Panics
 /// If a face index is out of range of `positions`.
 pub fn covered_unused(positions: &[[f64; 3]], n_points: usize, quads: &[[u32; 4]], tau: f64) -> Vec<bool> {
+    covered_unused_by(positions, n_points, quads, quads, tau)
+}
+
+/// [`covered_unused`] with the faces that cover apart from those that use: the points
+/// no face of `quads` uses that lie inside a face of `covering` (any faces, e.g. a
+/// subset of `quads`).
+///
+/// # Panics
+/// If a face index is out of range of `positions`.
+pub fn covered_unused_by(
+    positions: &[[f64; 3]],
+    n_points: usize,
+    quads: &[[u32; 4]],
+    covering: &[[u32; 4]],
+    tau: f64,
+) -> Vec<bool> {
     let n_points = n_points.min(positions.len());
     let mut used = vec![false; positions.len()];
     for q in quads {
@@ -34,7 +50,7 @@ pub fn covered_unused(positions: &[[f64; 3]], n_points: usize, quads: &[[u32; 4]
     if !(tau >= 0.0 && tau.is_finite()) {
         return out;
     }
-    let faces: Vec<FacePlane> = quads.iter().filter_map(|q| FacePlane::new(positions, q, tau)).collect();
+    let faces: Vec<FacePlane> = covering.iter().filter_map(|q| FacePlane::new(positions, q, tau)).collect();
     if faces.is_empty() {
         return out;
     }

@@ -8,7 +8,7 @@ use point2quad::io::points::read_points;
 use point2quad::mesh::poly::PolyMesh;
 use point2quad::pipeline::model::Model;
 use point2quad::pipeline::reconstruct::{
-    reconstruct_ensemble_with_report, ReconstructConfig, SecondPass, SecondPassMode,
+    reconstruct_ensemble_with_report, ReconstructConfig, SecondPass, SecondPassCover, SecondPassMode,
 };
 use point2quad::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -84,6 +84,9 @@ OPTIONS:
                           default: one pass)
     --second-pass-tau T   how far off a face's plane a point still lies inside it, in
                           units of the face's mean edge length, 0 <= T <= 10 [0.25]
+    --second-pass-cover C which faces call the points inside them noise: `all` the
+                          first pass's faces, `believed` only those the classifier
+                          predicted real (not the rescued, filled or closing quads) [all]
 ";
 
 const SPEC: Spec = Spec {
@@ -102,6 +105,7 @@ const SPEC: Spec = Spec {
         "--merge-share",
         "--second-pass",
         "--second-pass-tau",
+        "--second-pass-cover",
     ],
     switches: &[
         "--no-postprocess",
@@ -226,10 +230,12 @@ pub fn run(argv: &[String]) -> Result<()> {
         0.5,
         "a share of the 8th-neighbour distance",
     )?;
-    if a.value("--second-pass").is_none() && a.value("--second-pass-tau").is_some() {
-        return Err(Error::Usage(format!(
-            "{cmd}: --second-pass-tau has no effect without --second-pass MODE; give both or neither"
-        )));
+    for opt in ["--second-pass-tau", "--second-pass-cover"] {
+        if a.value("--second-pass").is_none() && a.value(opt).is_some() {
+            return Err(Error::Usage(format!(
+                "{cmd}: {opt} has no effect without --second-pass MODE; give both or neither"
+            )));
+        }
     }
     if let Some(mode) = a.value("--second-pass") {
         let mode = match mode {
@@ -244,7 +250,17 @@ pub fn run(argv: &[String]) -> Result<()> {
         };
         let tau =
             a.parsed_in(cmd, "--second-pass-tau", 0.25f64, 0.0, 10.0, "a share of a face's edge length")?;
-        cfg.second_pass = Some(SecondPass { tau, mode });
+        let cover = match a.value("--second-pass-cover") {
+            None | Some("all") => SecondPassCover::All,
+            Some("believed") => SecondPassCover::Believed,
+            Some(c) => {
+                return Err(Error::Usage(format!(
+                    "{cmd}: --second-pass-cover {}: expected all or believed (see `point2quad {cmd} --help`)",
+                    c.escape_debug()
+                )))
+            }
+        };
+        cfg.second_pass = Some(SecondPass { tau, mode, cover });
     }
     // Check the output names before the work, not after it.
     point2quad::io::mesh_io::MeshFormat::from_path(&out)?;

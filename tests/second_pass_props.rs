@@ -200,7 +200,7 @@ fn the_second_pass_drops_the_points_inside_faces_and_keeps_the_mesh_valid() {
             m[2] + 0.004 * (rng.f64() - 0.5),
         ]);
     }
-    let one = ReconstructConfig::default();
+    let one = ReconstructConfig { second_pass: None, ..Default::default() };
     let first = reconstruct(&pts, shipped(), &one).expect("first pass");
     let mut used = vec![false; first.vertices.len()];
     first.quads.iter().flatten().for_each(|&v| used[v as usize] = true);

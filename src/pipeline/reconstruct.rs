@@ -43,8 +43,9 @@ pub struct ReconstructConfig {
     /// exact duplicates only.
     pub merge_share: f32,
     /// A second pass without the points the first pass's mesh says are noise
-    /// ([`SecondPass`]); `None` (the default) runs one pass. Part of the post-process:
-    /// ignored when `run_postprocess` is false.
+    /// ([`SecondPass`]); `None` runs one pass. Default (session 26): τ 0.25,
+    /// [`SecondPassMode::Average`], [`SecondPassCover::Believed`]. Part of the
+    /// post-process: ignored when `run_postprocess` is false.
     pub second_pass: Option<SecondPass>,
 }
 
@@ -93,7 +94,11 @@ impl Default for ReconstructConfig {
             run_postprocess: true,
             postprocess: PostprocessConfig::default(),
             merge_share: 0.001,
-            second_pass: None,
+            second_pass: Some(SecondPass {
+                tau: 0.25,
+                mode: SecondPassMode::Average,
+                cover: SecondPassCover::Believed,
+            }),
         }
     }
 }

@@ -76,17 +76,18 @@ OPTIONS:
                           the faces next to it over the same vertices when that gives
                           better-shaped quads)
     --second-pass MODE    after the post-process, take the points no face uses that
-                          lie inside a face (noise, most likely) out, propose and score
-                          the candidates again without them and post-process once
-                          more: `average` scores a candidate both passes proposed by
-                          the mean of its two probabilities, `replace` keeps the second
-                          pass's alone (session 26 experiment; about twice the time;
-                          default: one pass)
+                          lie inside a face the classifier believes (noise, most
+                          likely) out, propose and score the candidates again without
+                          them and post-process once more: `average` scores a
+                          candidate both passes proposed by the mean of its two
+                          probabilities, `replace` keeps the second pass's alone,
+                          `off` runs one pass (about half the time) [average]
     --second-pass-tau T   how far off a face's plane a point still lies inside it, in
                           units of the face's mean edge length, 0 <= T <= 10 [0.25]
-    --second-pass-cover C which faces call the points inside them noise: `all` the
-                          first pass's faces, `believed` only those the classifier
-                          predicted real (not the rescued, filled or closing quads) [all]
+    --second-pass-cover C which faces call the points inside them noise: `believed`
+                          those the classifier predicted real, `all` every face of the
+                          first pass's mesh (rescued, filled and closing quads too)
+                          [believed]
 ";
 
 const SPEC: Spec = Spec {
@@ -230,37 +231,41 @@ pub fn run(argv: &[String]) -> Result<()> {
         0.5,
         "a share of the 8th-neighbour distance",
     )?;
-    for opt in ["--second-pass-tau", "--second-pass-cover"] {
-        if a.value("--second-pass").is_none() && a.value(opt).is_some() {
+    let mode = match a.value("--second-pass") {
+        None | Some("average") => Some(SecondPassMode::Average),
+        Some("replace") => Some(SecondPassMode::Replace),
+        Some("off") => None,
+        Some(m) => {
             return Err(Error::Usage(format!(
-                "{cmd}: {opt} has no effect without --second-pass MODE; give both or neither"
-            )));
+                "{cmd}: --second-pass {}: expected average, replace or off (see `point2quad {cmd} --help`)",
+                m.escape_debug()
+            )))
         }
-    }
-    if let Some(mode) = a.value("--second-pass") {
-        let mode = match mode {
-            "replace" => SecondPassMode::Replace,
-            "average" => SecondPassMode::Average,
-            _ => {
-                return Err(Error::Usage(format!(
-                    "{cmd}: --second-pass {}: expected replace or average (see `point2quad {cmd} --help`)",
-                    mode.escape_debug()
-                )))
+    };
+    match mode {
+        None => {
+            for opt in ["--second-pass-tau", "--second-pass-cover"] {
+                if a.value(opt).is_some() {
+                    return Err(Error::Usage(format!(
+                        "{cmd}: {opt} has no effect with --second-pass off; give one of them"
+                    )));
+                }
             }
-        };
-        let tau =
-            a.parsed_in(cmd, "--second-pass-tau", 0.25f64, 0.0, 10.0, "a share of a face's edge length")?;
-        let cover = match a.value("--second-pass-cover") {
-            None | Some("all") => SecondPassCover::All,
-            Some("believed") => SecondPassCover::Believed,
-            Some(c) => {
-                return Err(Error::Usage(format!(
-                    "{cmd}: --second-pass-cover {}: expected all or believed (see `point2quad {cmd} --help`)",
+            cfg.second_pass = None;
+        }
+        Some(mode) => {
+            let tau =
+                a.parsed_in(cmd, "--second-pass-tau", 0.25f64, 0.0, 10.0, "a share of a face's edge length")?;
+            let cover = match a.value("--second-pass-cover") {
+                None | Some("believed") => SecondPassCover::Believed,
+                Some("all") => SecondPassCover::All,
+                Some(c) => return Err(Error::Usage(format!(
+                    "{cmd}: --second-pass-cover {}: expected believed or all (see `point2quad {cmd} --help`)",
                     c.escape_debug()
-                )))
-            }
-        };
-        cfg.second_pass = Some(SecondPass { tau, mode, cover });
+                ))),
+            };
+            cfg.second_pass = cfg.run_postprocess.then_some(SecondPass { tau, mode, cover });
+        }
     }
     // Check the output names before the work, not after it.
     point2quad::io::mesh_io::MeshFormat::from_path(&out)?;

@@ -259,10 +259,12 @@ pub fn run(argv: &[String]) -> Result<()> {
             let cover = match a.value("--second-pass-cover") {
                 None | Some("believed") => SecondPassCover::Believed,
                 Some("all") => SecondPassCover::All,
-                Some(c) => return Err(Error::Usage(format!(
+                Some(c) => {
+                    return Err(Error::Usage(format!(
                     "{cmd}: --second-pass-cover {}: expected believed or all (see `point2quad {cmd} --help`)",
                     c.escape_debug()
-                ))),
+                )))
+                }
             };
             cfg.second_pass = cfg.run_postprocess.then_some(SecondPass { tau, mode, cover });
         }

@@ -7,6 +7,7 @@
 //! vertices the hole filling added (mapped back to the input's frame). Exact duplicate
 //! points are one point to the pipeline: faces use the first occurrence.
 
+use crate::mesh::halfedge::corner_set;
 use crate::mesh::poly::QuadMesh;
 use crate::mesh::postprocess::{postprocess_with_reserve, PostprocessConfig, PostprocessReport};
 use crate::pipeline::candidates::{generate, CandidateConfig};
@@ -223,27 +224,22 @@ pub fn reconstruct_ensemble_with_report(
         // 1e-200. Its thresholds are angles and ratios, so only the vertices the hole
         // filling adds need mapping back; the input's own are written back as given.
         let local64: Vec<[f64; 3]> = uniq.iter().map(|&p| frame.to_local_f64(p)).collect();
-        let (mut mesh, mut pp) = postprocess_with_reserve(
-            &local64,
-            &faces,
-            &face_probs,
-            &reserve,
-            &reserve_probs,
-            &cfg.postprocess,
-        )?;
+        // Candidates above the threshold and the rest (the reserve) → mesh.
+        let post = |(faces, face_probs, reserve, reserve_probs): &Split| {
+            postprocess_with_reserve(&local64, faces, face_probs, reserve, reserve_probs, &cfg.postprocess)
+        };
+        let first = (faces, face_probs, reserve, reserve_probs);
+        let (mut mesh, mut pp) = post(&first)?;
+        let faces = &first.0;
         if let Some(sp) = &cfg.second_pass {
             clock.lap(&mut report, "postprocess");
             let noise = match sp.cover {
                 SecondPassCover::All => covered_unused(&mesh.vertices, u, &mesh.quads, sp.tau),
                 SecondPassCover::Believed => {
-                    let key = |q: &[u32; 4]| {
-                        let mut k = *q;
-                        k.sort_unstable();
-                        k
-                    };
-                    let believed: std::collections::HashSet<[u32; 4]> = faces.iter().map(key).collect();
+                    let believed: std::collections::HashSet<[u32; 4]> =
+                        faces.iter().map(|&q| corner_set(q)).collect();
                     let covering: Vec<[u32; 4]> =
-                        mesh.quads.iter().copied().filter(|q| believed.contains(&key(q))).collect();
+                        mesh.quads.iter().copied().filter(|&q| believed.contains(&corner_set(q))).collect();
                     covered_unused_by(&mesh.vertices, u, &mesh.quads, &covering, sp.tau)
                 }
             };
@@ -257,20 +253,12 @@ pub fn reconstruct_ensemble_with_report(
                 if !q2.is_empty() {
                     let q2: Vec<[u32; 4]> = q2.iter().map(|q| q.map(|v| kept[v as usize])).collect();
                     let (quads, probs) = merge_passes(&quads, &probs, &noise, &q2, &p2, sp.mode);
-                    let (faces, face_probs, reserve, reserve_probs) =
-                        split_at_threshold(&quads, &probs, cfg.threshold);
-                    report.predicted = faces.len();
+                    let second = split_at_threshold(&quads, &probs, cfg.threshold);
+                    report.predicted = second.0.len();
                     report.second_pass_dropped = Some(u - kept.len());
                     let t: f64 = report2.timings.iter().map(|t| t.1).sum();
                     clock.record(&mut report, "second pass", t);
-                    (mesh, pp) = postprocess_with_reserve(
-                        &local64,
-                        &faces,
-                        &face_probs,
-                        &reserve,
-                        &reserve_probs,
-                        &cfg.postprocess,
-                    )?;
+                    (mesh, pp) = post(&second)?;
                 }
             }
         }
@@ -351,14 +339,12 @@ fn score_cloud(
     Ok((cands.quads, probs))
 }
 
+/// Candidates above the threshold and their probabilities, then the rest and theirs.
+type Split = (Vec<[u32; 4]>, Vec<f32>, Vec<[u32; 4]>, Vec<f32>);
+
 /// Candidates above `threshold` (with their probabilities), then the rest (the
 /// reserve the post-process may rescue at holes).
-#[allow(clippy::type_complexity)]
-fn split_at_threshold(
-    quads: &[[u32; 4]],
-    probs: &[f32],
-    threshold: f32,
-) -> (Vec<[u32; 4]>, Vec<f32>, Vec<[u32; 4]>, Vec<f32>) {
+fn split_at_threshold(quads: &[[u32; 4]], probs: &[f32], threshold: f32) -> Split {
     let (mut faces, mut face_probs, mut reserve, mut reserve_probs) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for (q, &p) in quads.iter().zip(probs) {
@@ -387,11 +373,7 @@ fn merge_passes(
     p2: &[f32],
     mode: SecondPassMode,
 ) -> (Vec<[u32; 4]>, Vec<f32>) {
-    let key = |q: &[u32; 4]| {
-        let mut k = *q;
-        k.sort_unstable();
-        k
-    };
+    let key = |q: &[u32; 4]| corner_set(*q);
     let first: std::collections::HashMap<[u32; 4], usize> = q1
         .iter()
         .enumerate()

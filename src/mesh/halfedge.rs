@@ -510,7 +510,7 @@ impl HalfedgeMesh {
     ///    also join two fans of a vertex. When nothing can be forced any more, every vertex
     ///    must have one fan again. Where one has more, the fan holding its oldest face
     ///    stays and the faces of its other fans (all from phase 2) are taken back; phase 2
-    ///    restarts from the end of phase 1 without them. After [`FORCE_ROUNDS`] rounds it
+    ///    restarts from the end of phase 1 without them. After `FORCE_ROUNDS` rounds it
     ///    forces nothing, which leaves phase 1's mesh.
     /// 3. The faces taken back are offered again as in phase 1 (what they conflicted with
     ///    may have gone too).

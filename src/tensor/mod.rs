@@ -6,7 +6,7 @@
 //! - [`Graph`]: the tape. Ops push nodes in execution order; `backward` is a reverse
 //!   loop over one exhaustive `match` on [`Op`] (a new op cannot compile without its
 //!   gradient); gradients accumulate into [`Grads`]. Layer kernels from other modules
-//!   plug in through [`CustomOp`] (its `backward` is required); [`gradcheck`] checks
+//!   plug in through [`CustomOp`] (its `backward` is required); [`gradcheck()`] checks
 //!   any of them against central finite differences.
 //!
 //! ```

@@ -12,7 +12,7 @@
 //!    needs_grad)` returns one `Option<Tensor>` per input, shaped like that input
 //!    (`None` where `needs_grad[i]` is false). The tape adds them (`+=`).
 //! 3. Call it with `graph.custom(Box::new(op), &[features, weights])`.
-//! 4. Check it with [`crate::tensor::gradcheck`] on random shapes (see `tests/tensor_ops.rs`).
+//! 4. Check it with [`crate::tensor::gradcheck()`] on random shapes (see `tests/tensor_ops.rs`).
 
 use super::tape::Var;
 use super::tensor::Tensor;

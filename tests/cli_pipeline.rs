@@ -625,6 +625,7 @@ fn reconstruct_second_pass_option() {
         (&["--second-pass", "average", "--second-pass-tau", "11"], "--second-pass-tau"),
         (&["--second-pass", "average", "--second-pass-tau", "nan"], "--second-pass-tau"),
         (&["--second-pass", "average", "--no-postprocess"], "no effect with --no-postprocess"),
+        (&["--second-pass-cover", "all", "--no-postprocess"], "no effect with --no-postprocess"),
     ] {
         let argv = [&["reconstruct", &cloud, "-o", &never][..], args].concat();
         let err = fails(&argv, 2);

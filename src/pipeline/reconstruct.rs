@@ -271,10 +271,12 @@ pub fn reconstruct_ensemble_with_report(
         QuadMesh { vertices: points.to_vec(), quads: faces.iter().map(|q| q.map(to_output)).collect() }
     };
     report.faces = mesh.quads.len();
-    let last = if report.timings.iter().any(|t| t.0 == "second pass") {
-        "second postprocess"
-    } else {
-        "postprocess"
+    // With a second pass configured, the last stage is its post-process, or (when it did
+    // not run) the test that found nothing to leave out.
+    let last = match (&cfg.second_pass, report.second_pass_dropped) {
+        (Some(_), Some(_)) if cfg.run_postprocess => "second postprocess",
+        (Some(_), None) if cfg.run_postprocess => "second pass",
+        _ => "postprocess",
     };
     clock.lap(&mut report, last);
     Ok((mesh, report))
@@ -373,6 +375,9 @@ fn merge_passes(
     p2: &[f32],
     mode: SecondPassMode,
 ) -> (Vec<[u32; 4]>, Vec<f32>) {
+    if mode == SecondPassMode::Replace {
+        return (q2.to_vec(), p2.to_vec());
+    }
     let key = |q: &[u32; 4]| corner_set(*q);
     let first: std::collections::HashMap<[u32; 4], usize> = q1
         .iter()
@@ -385,24 +390,22 @@ fn merge_passes(
     let mut taken = vec![false; q1.len()];
     for (q, &p) in q2.iter().zip(p2) {
         match first.get(&key(q)) {
-            Some(&i) if mode == SecondPassMode::Average => {
+            Some(&i) => {
                 taken[i] = true;
                 quads.push(q1[i]);
                 probs.push(0.5 * (p + p1[i]));
             }
-            _ => {
+            None => {
                 quads.push(*q);
                 probs.push(p);
             }
         }
     }
-    if mode == SecondPassMode::Average {
-        let mut rest: Vec<usize> = first.values().copied().filter(|&i| !taken[i]).collect();
-        rest.sort_unstable();
-        for i in rest {
-            quads.push(q1[i]);
-            probs.push(p1[i]);
-        }
+    let mut rest: Vec<usize> = first.values().copied().filter(|&i| !taken[i]).collect();
+    rest.sort_unstable();
+    for i in rest {
+        quads.push(q1[i]);
+        probs.push(p1[i]);
     }
     (quads, probs)
 }

@@ -11,7 +11,8 @@
 //! The faces are those of the first pass's finished mesh, so a hole the post-process
 //! filled or closed covers the points in it too.
 
-use crate::math::{cross, dot};
+use crate::math::{cross, dot, norm, sub};
+use crate::mesh::hole_fill::quad_normal;
 
 /// The points among `positions[..n_points]` that no face of `quads` uses and that lie
 /// inside some face: their projection onto the face's plane (the plane through its
@@ -80,13 +81,8 @@ struct FacePlane {
 impl FacePlane {
     fn new(pos: &[[f64; 3]], q: &[u32; 4], tau: f64) -> Option<FacePlane> {
         let c = q.map(|v| pos[v as usize]);
-        let n = cross(sub(c[2], c[0]), sub(c[3], c[1]));
-        let len = dot(n, n).sqrt();
-        if !(len > 0.0 && len.is_finite()) {
-            return None;
-        }
-        let normal = n.map(|x| x / len);
-        let edge = (0..4).map(|k| dist(c[k], c[(k + 1) % 4])).sum::<f64>() / 4.0;
+        let normal = quad_normal(&c)?;
+        let edge = (0..4).map(|k| norm(sub(c[k], c[(k + 1) % 4]))).sum::<f64>() / 4.0;
         let slack = tau * edge;
         // The region a contained point lies in: the quad projected onto its plane
         // (through the first corner), thickened by the slack both ways along the
@@ -138,15 +134,6 @@ fn in_triangle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3], n: [f64; 3]) 
         dot(cross(sub(a, c), sub(p, c)), n),
     ];
     s.iter().all(|&x| x >= 0.0) || s.iter().all(|&x| x <= 0.0)
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
-    let d = sub(a, b);
-    dot(d, d).sqrt()
 }
 
 /// A uniform grid over the faces' boxes: about four cells per face at most, each face

@@ -199,6 +199,7 @@ pub fn run(argv: &[String]) -> Result<()> {
             "--rescue-lone",
             "--second-pass",
             "--second-pass-tau",
+            "--second-pass-cover",
         ];
         let switches =
             ["--no-rescue", "--no-unfold", "--no-close", "--no-seal", "--no-inverted-fills", "--no-untangle"];

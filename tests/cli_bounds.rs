@@ -87,6 +87,16 @@ fn work_sizing_options_are_bounded() {
         ),
         (vec!["reconstruct", c, "-o", &mesh, "--k", huge], "--k must be between 3 and 64", huge),
         (
+            vec!["dataset", "--out", &ds, "--synthetic", "1", "--per-point", "0"],
+            "--per-point must be between 1 and 1024",
+            "0",
+        ),
+        (
+            vec!["dataset", "--out", &ds, "--synthetic", "1", "--per-point", "1025"],
+            "--per-point must be between 1 and 1024",
+            "1025",
+        ),
+        (
             vec!["dataset", "--out", &ds, "--synthetic", "100001"],
             "--synthetic must be between 0 and 100000",
             "100001",
@@ -175,4 +185,49 @@ fn continuation_adds_candidates_from_the_cli() {
     let (off, on) = (lines("0"), lines("1"));
     assert!(off.is_subset(&on), "continuation dropped candidates");
     assert!(on.len() > off.len(), "nothing added: {} vs {}", on.len(), off.len());
+}
+
+/// `dataset --per-point` (session 27) sizes the samples' candidate budget as
+/// `reconstruct --per-point` does: more candidates per sample for a larger budget, never
+/// a lower coverage, and the default is 32 (its files are byte-identical to an explicit 32).
+#[test]
+fn dataset_per_point_sets_the_budget() {
+    let dir = Scratch::new("cli_dataset_per_point");
+    type Files = Vec<(std::path::PathBuf, Vec<u8>)>;
+    let index = |pp: Option<&str>| -> (Files, Vec<(usize, f64)>) {
+        let out_dir = dir.p(&format!("ds{}", pp.unwrap_or("default")));
+        let mut args = vec!["dataset", "--out", &out_dir, "--synthetic", "2", "--seed", "3"];
+        if let Some(pp) = pp {
+            args.extend(["--per-point", pp]);
+        }
+        let out = p2q(&args);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let text = std::fs::read_to_string(format!("{out_dir}/index.txt")).expect("test: index written");
+        let rows = text
+            .lines()
+            .filter(|l| !l.starts_with('#'))
+            .map(|l| {
+                let c: Vec<&str> = l.split('\t').collect();
+                (c[2].parse().expect("test: candidates"), c[4].parse().expect("test: coverage"))
+            })
+            .collect();
+        let mut files: Files = std::fs::read_dir(&out_dir)
+            .expect("test: list")
+            .map(|e| e.expect("test: entry").path())
+            .filter(|p| p.extension().is_some_and(|x| x == "p2qs"))
+            .map(|p| (p.file_name().expect("test: name").into(), std::fs::read(&p).expect("test: sample")))
+            .collect();
+        files.sort();
+        (files, rows)
+    };
+    let (d, default) = index(None);
+    let (e, explicit) = index(Some("32"));
+    let (_, small) = index(Some("1"));
+    let (_, large) = index(Some("64"));
+    assert_eq!((d, &default), (e, &explicit), "the default is not 32");
+    assert_eq!(default.len(), 2);
+    for i in 0..2 {
+        assert!(small[i].0 < default[i].0 && default[i].0 < large[i].0, "{small:?} {default:?} {large:?}");
+        assert!(small[i].1 <= default[i].1 && default[i].1 <= large[i].1, "{small:?} {default:?} {large:?}");
+    }
 }

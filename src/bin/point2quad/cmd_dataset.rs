@@ -68,6 +68,9 @@ OPTIONS:
     --seed S          random seed (default 0); the same seed gives the same files
     --continue-rank R lattice continuation in the candidates, as `reconstruct
                       --continue-rank` (0 turns it off; 0 to 1000) [2]
+    --per-point P     candidates kept per proposing point before de-duplication,
+                      as `reconstruct --per-point` (1 to 1024) [32]; a model
+                      trained on such data wants the same value at reconstruct
 
 At least one of --synthetic and --meshes is needed. A mesh that cannot be read, is
 not pure-quad or has no faces is skipped with a warning naming it; the run fails if a
@@ -155,6 +158,7 @@ pub fn run(argv: &[String]) -> Result<()> {
             "--offset",
             "--seed",
             "--continue-rank",
+            "--per-point",
             "--coarsen",
             "--stretch",
             "--min-aspect",
@@ -197,6 +201,14 @@ pub fn run(argv: &[String]) -> Result<()> {
         1000,
         "a rank among a point's candidates",
     )? as u16;
+    cand_cfg.per_point = args.parsed_in(
+        CMD,
+        "--per-point",
+        cand_cfg.per_point,
+        1,
+        crate::cmd_candidates::MAX_PER_POINT,
+        "more keeps every candidate anyway",
+    )?;
     let coarsen = copy_values(&args, CMD, "--coarsen", |f| {
         if f > 0.0 && f < 1.0 {
             Ok(())

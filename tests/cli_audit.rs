@@ -595,11 +595,36 @@ fn a_cloud_beyond_f32_resolution_is_named() {
     let mut apart = grid.clone();
     apart.extend(grid.iter().map(|p| [p[0] + 1e9, p[1], p[2]]));
     let apart = dir.write("apart.xyz", &xyz(&apart));
-    let err = assert_ok(&p2q(&["reconstruct", &apart, "-o", &out]), "two grids 1e9 apart");
+    // Session 27: every point unresolved is an error (before, the collapsed positions
+    // could give wrong faces with exit 0), and nothing is written.
+    assert_fails(
+        &p2q(&["reconstruct", &apart, "-o", &out]),
+        1,
+        &[
+            "apart.xyz",
+            "288 of its 288 distinct points",
+            "closer together than the normalised frame resolves",
+        ],
+        "two grids 1e9 apart",
+    );
+    assert!(!std::path::Path::new(&out).exists());
+    // A unit grid inside a grid of spacing 1e10: left out, with a warning; the big
+    // grid's faces are the big grid's alone.
+    let big: Vec<[f64; 3]> = grid.iter().map(|p| [p[0] * 1e10, p[1] * 1e10, 0.0]).collect();
+    let mut mixed = big.clone();
+    mixed.extend(grid.iter().map(|p| [p[0] + 3.5e10, p[1] + 3.5e10, p[2]]));
+    let mixed = dir.write("mixed.xyz", &xyz(&mixed));
+    let err = assert_ok(&p2q(&["reconstruct", &mixed, "-o", &out]), "a unit grid inside a huge one");
     assert!(
-        err.contains("closer together than the normalised frame resolves") && err.contains("apart.xyz"),
+        err.contains("144 point(s) lie closer together than the normalised frame resolves")
+            && err.contains("left out")
+            && err.contains("point 144 "),
         "{err}"
     );
+    let f = faces(&out);
+    let big_only =
+        |l: &String| l.split_whitespace().skip(1).all(|t| t.parse::<usize>().is_ok_and(|v| v <= 144));
+    assert!(!f.is_empty() && f.iter().all(big_only), "{f:?}");
     let mut near = grid.clone();
     near.extend(grid.iter().map(|p| [p[0] + 1e-7, p[1], p[2]]));
     for (name, pts) in [("grid", &grid), ("near copy", &near)] {
@@ -785,4 +810,105 @@ fn refine_and_synth_name_themselves_and_their_options() {
     }
     let r = p2q(&["synth", "--shape", "torus", "--seed", "1", "-o", &c, "--offset", "-1"]);
     assert_fails(&r, 2, &["--offset must be a finite number >= 0"], "synth --offset -1");
+}
+
+/// Session 27's audit, `dataset`: (1) a sample that cannot be written (the file-size
+/// limit) left the samples before it and no index, and the folder then refused a rerun;
+/// now nothing the run wrote stays (the folder too, when the run made it). (2) Entries
+/// named like meshes that are not files (a folder, a link to nothing) were skipped
+/// without a word; (3) a mesh whose face repeats a corner, or none of whose faces is a
+/// candidate (all corners on a line), made a sample; each is now skipped with a warning
+/// naming it, and the good mesh beside them is written as before.
+#[test]
+fn dataset_is_all_or_nothing_and_names_what_it_skips() {
+    let dir = Scratch::new("audit27_ds");
+    // (1) Under a 1,000 KiB file-size limit (bash's unit) the first samples fit and a
+    // later one does not; SIGXFSZ ignored, so the write fails with EFBIG.
+    let out = dir.p("limited");
+    let script = format!(
+        "trap '' XFSZ; ulimit -f 1000; exec '{}' dataset --out '{out}' --synthetic 4",
+        env!("CARGO_BIN_EXE_point2quad")
+    );
+    let r = Command::new("bash").arg("-c").arg(&script).output().expect("test: run bash");
+    let err = stderr(&r);
+    assert_eq!(r.status.code(), Some(1), "{err}");
+    assert!(err.contains("File too large") && err.contains("[1/4]"), "{err}");
+    assert!(!std::path::Path::new(&out).exists(), "{out} left behind: {err}");
+    // The same in a folder that was there before: it stays, empty.
+    let kept = dir.path("kept");
+    std::fs::create_dir(&kept).expect("test: mkdir");
+    let script = script.replace(&out, &kept.display().to_string());
+    let r = Command::new("bash").arg("-c").arg(&script).output().expect("test: run bash");
+    assert_eq!(r.status.code(), Some(1), "{}", stderr(&r));
+    assert_eq!(std::fs::read_dir(&kept).expect("test: list").count(), 0);
+    // (2) and (3).
+    let meshes = dir.path("meshes");
+    std::fs::create_dir(&meshes).expect("test: mkdir");
+    let grid: String = (0..16).map(|i| format!("v {} {} 0\n", i % 4, i / 4)).collect::<String>()
+        + &(0..9)
+            .map(|c| {
+                let v = (c / 3) * 4 + c % 3 + 1;
+                format!("f {} {} {} {}\n", v, v + 1, v + 5, v + 4)
+            })
+            .collect::<String>();
+    std::fs::write(meshes.join("grid.obj"), &grid).expect("test: write");
+    std::fs::write(meshes.join("repeat.obj"), format!("{grid}f 1 1 2 5\n")).expect("test: write");
+    let line: String = (0..4).map(|i| format!("v {i} 0 0\n")).collect::<String>() + "f 1 2 3 4\n";
+    std::fs::write(meshes.join("line.obj"), line).expect("test: write");
+    std::fs::create_dir(meshes.join("folder.obj")).expect("test: mkdir");
+    std::os::unix::fs::symlink(meshes.join("gone.obj"), meshes.join("broken.obj")).expect("test: symlink");
+    let data = dir.p("data");
+    let m = meshes.display().to_string();
+    let err = assert_ok(&p2q(&["dataset", "--out", &data, "--meshes", &m]), "dataset");
+    for (name, why) in [
+        ("repeat.obj", "1 face(s) repeat a corner"),
+        ("line.obj", "none of its 1 faces is among"),
+        ("folder.obj", "a folder, not a mesh file"),
+        ("broken.obj", "a link to nothing"),
+    ] {
+        assert!(
+            err.lines().any(|l| l.contains("skipping") && l.contains(name) && l.contains(why)),
+            "{name}: {err}"
+        );
+    }
+    assert!(
+        err.contains("repeat.obj: 1 face(s) repeat a corner, so they are not quads; the first is face 10"),
+        "{err}"
+    );
+    assert!(err.contains("1 samples in") && err.contains("(4 skipped)"), "{err}");
+    let samples: Vec<String> = std::fs::read_dir(&data)
+        .expect("test: list")
+        .map(|e| e.expect("test: entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(samples.len(), 2, "{samples:?}");
+    assert!(samples.contains(&"grid.p2qs".to_string()) && samples.contains(&"index.txt".to_string()));
+}
+
+/// Session 27's audit, `reconstruct` options that could do nothing: a rescue bound above
+/// the threshold (the rescue takes candidates scored at most the threshold) and
+/// `--no-seal` / `--no-untangle` beside `--no-close` (which turns both off) are usage
+/// errors naming the options, like the other no-effect pairs; nothing is written. A
+/// bound under a raised threshold works.
+#[test]
+fn reconstruct_options_that_do_nothing_are_named() {
+    let dir = Scratch::new("audit27_opts");
+    let cloud = dir.write("c.xyz", &xyz(&cube_cloud(1.0)));
+    let out = dir.p("o.obj");
+    let before = dir.entries();
+    for (args, needles) in [
+        (vec!["--rescue-min-prob", "0.7"], vec!["--rescue-min-prob 0.7 is above the threshold 0.5"]),
+        (vec!["--threshold", "0.3", "--rescue-min-prob", "0.4"], vec!["0.4 is above the threshold 0.3"]),
+        (vec!["--no-close", "--no-seal"], vec!["--no-seal has no effect with --no-close"]),
+        (vec!["--no-untangle", "--no-close"], vec!["--no-untangle has no effect with --no-close"]),
+    ] {
+        let mut all = vec!["reconstruct", &cloud, "-o", &out];
+        all.extend(&args);
+        assert_fails(&p2q(&all), 2, &needles, &format!("{args:?}"));
+        assert_eq!(dir.entries(), before, "{args:?}: files left behind");
+    }
+    assert_ok(
+        &p2q(&["reconstruct", &cloud, "-o", &out, "--threshold", "0.8", "--rescue-min-prob", "0.7"]),
+        "a bound under a raised threshold",
+    );
+    assert!(!faces(&out).is_empty());
 }

@@ -195,6 +195,29 @@ fn a_far_outlier_leaves_the_rest_unchanged() {
     }
 }
 
+/// A part of the cloud below the frame's resolution (a unit-sized copy inside the same
+/// shape scaled by 1e10) is left out whole (session 27): the output's faces are those of
+/// the big part alone, none uses a point of the small one, and those points come back
+/// as given. Before, the collapsed positions gave faces, some of them inverted.
+#[test]
+fn an_unresolved_part_leaves_the_rest_unchanged() {
+    let small = shapes::cube_sphere(5).vertices;
+    let big: Vec<[f64; 3]> = small.iter().map(|p| p.map(|c| c * 1e10)).collect();
+    let cfg = ReconstructConfig { threshold: 0.3, ..Default::default() };
+    let alone = reconstruct(&big, model(), &cfg).expect("alone");
+    assert!(!alone.quads.is_empty());
+    let mut with = big.clone();
+    with.extend(&small);
+    let (m, rep) = reconstruct_with_report(&with, model(), &cfg).expect("with a small part");
+    assert_eq!((rep.unresolved, rep.first_unresolved, rep.outliers), (small.len(), Some(big.len()), 0));
+    // Vertices the hole filling added follow the input points: past the small part.
+    let (nb, ns) = (big.len() as u32, small.len() as u32);
+    let shift = |i: u32| if i >= nb { i + ns } else { i };
+    assert_eq!(m.quads, alone.quads.iter().map(|q| q.map(shift)).collect::<Vec<_>>());
+    assert_eq!(m.vertices[..with.len()], with[..]);
+    assert_eq!(m.vertices[with.len()..], alone.vertices[big.len()..]);
+}
+
 /// The post-process keeps one face per corner set: a grid's faces given three times
 /// (the copies reversed or rotated, with other probabilities) give the grid's mesh,
 /// with the duplicates counted; the likeliest copy is the one inserted.
@@ -407,12 +430,24 @@ fn unresolved_points_are_those_below_the_frames_resolution() {
     near.extend(grid.iter().map(|p| [p[0] + 1e-7, p[1], p[2]]));
     let p = prepare_cloud(&near, share).unwrap();
     assert_eq!((p.unresolved, p.duplicates, p.distinct.len()), (0, 144, 144));
+    // Every point unresolved: nothing is left to reconstruct, an error that says why
+    // (session 27; before, the collapsed positions gave wrong faces).
     for gap in [1e8, 1e9] {
         let mut apart = grid.clone();
         apart.extend(grid.iter().map(|p| [p[0] + gap, p[1], p[2]]));
-        let p = prepare_cloud(&apart, share).unwrap();
-        assert_eq!((p.unresolved, p.first_unresolved), (288, Some(0)), "gap {gap:e}");
+        let e = prepare_cloud(&apart, share).unwrap_err().to_string();
+        assert!(
+            e.contains("288 of its 288 distinct points") && e.contains("first is point 0"),
+            "gap {gap:e}: {e}"
+        );
     }
+    // A unit grid beside a grid of spacing 1e10: the unit grid is unresolved and left
+    // out (like far outliers), the big one kept whole.
+    let mut mixed: Vec<[f64; 3]> = grid.iter().map(|p| [p[0] * 1e10, p[1] * 1e10, 0.0]).collect();
+    mixed.extend(grid.iter().map(|p| [p[0] + 3.5e10, p[1] + 3.5e10, p[2]]));
+    let p = prepare_cloud(&mixed, share).unwrap();
+    assert_eq!((p.unresolved, p.first_unresolved, p.duplicates, p.outliers), (144, Some(144), 0, 0));
+    assert_eq!(p.distinct, (0..144).collect::<Vec<u32>>());
     // 1e5 apart, a spacing is 2e-5 of the radius, about 170 f32 steps: resolved.
     let mut apart = grid.clone();
     apart.extend(grid.iter().map(|p| [p[0] + 1e5, p[1], p[2]]));

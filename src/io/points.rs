@@ -141,7 +141,13 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
             p[0] = coord(t0, name, ln, &format_args!("point {i}"))?;
             for (axis, c) in p.iter_mut().enumerate().skip(1) {
                 let tok = toks.next().ok_or_else(|| {
-                    Error::parse(name, ln, format!("point {i}: needs 3 coordinates, found {axis}"))
+                    // `0,,1`: three fields, one empty (session 27's audit: it read "found 2").
+                    match fields(raw).iter().take(3).position(|f| f.is_empty()) {
+                        Some(k) if text::find_byte(raw, b',').is_some() => {
+                            Error::parse(name, ln, format!("point {i}: field {} is empty", k + 1))
+                        }
+                        _ => Error::parse(name, ln, format!("point {i}: needs 3 coordinates, found {axis}")),
+                    }
                 })?;
                 *c = coord(tok, name, ln, &format_args!("point {i}"))?;
             }
@@ -276,12 +282,21 @@ fn header_columns(line: &[u8]) -> std::result::Result<[usize; 3], String> {
         [Some(x), Some(y), Some(z)] => Ok([x, y, z]),
         _ if found.iter().enumerate().all(|(axis, f)| f.map_or(true, |c| c == axis)) => Ok([0, 1, 2]),
         _ => {
+            // Only some named, and one of those not in its own column (x first, y
+            // second, z third), so the others cannot be taken from their places.
+            let axes = ["x", "y", "z"];
+            let named: Vec<String> = axes
+                .iter()
+                .zip(&found)
+                .filter_map(|(a, f)| f.map(|c| format!("{a} in column {}", c + 1)))
+                .collect();
             let missing: Vec<&str> =
-                ["x", "y", "z"].iter().zip(&found).filter(|(_, f)| f.is_none()).map(|(a, _)| *a).collect();
+                axes.iter().zip(&found).filter(|(_, f)| f.is_none()).map(|(a, _)| *a).collect();
             Err(format!(
-                "the header names some coordinate columns, one not among the first three, but not {}; \
-                 name the three columns x, y and z, or give no header (the first three columns are \
-                 then x, y, z)",
+                "the header names {} but not {}; without all three named, named ones must be in \
+                 their own columns (x first, y second, z third); name the three columns x, y and z, \
+                 or give no header (the first three columns are then x, y, z)",
+                named.join(" and "),
                 missing.join(" or ")
             ))
         }
@@ -417,12 +432,13 @@ mod tests {
         for (src, want) in [
             (
                 &b"id,x,y\n1,2,3\n"[..],
-                "t.csv:1: the header names some coordinate columns, one not among the first three, but not z",
+                "t.csv:1: the header names x in column 2 and y in column 3 but not z; without all three named",
             ),
             (b"lat,z\n1,2,3\n", "t.csv:1: point 0: bad number 'lat'"),
             // Decimal commas in a named column after the third (it was (1, 2, 3)).
             (b"id x y z\n7 1 2 3,5\n", "t.csv:2: point 0: '7 1 2 3,5' looks like decimal commas"),
             (b"x,x,y,z\n1,2,3,4\n", "t.csv:1: the header names column 'x' twice"),
+            (b"b,x,c\n1,2,3\n", "t.csv:1: the header names x in column 2 but not y or z;"),
             (
                 b"id,x,y,z\n1,2,3\n",
                 "t.csv:2: point 0: the header puts a coordinate in column 4, the line has 3",
@@ -454,6 +470,11 @@ mod tests {
         let cases: &[(&[u8], &str)] = &[
             (b"1 2 3\n4 5\n", "t.xyz:2: point 1: needs 3 coordinates, found 2"),
             (b"1 2 3\n4\n", "t.xyz:2: point 1: needs 3 coordinates, found 1"),
+            // An empty field is named as such (session 27's audit), with or without a
+            // header; a short comma line still counts its values.
+            (b"x,y,z\n0.0,,0.0\n", "t.xyz:2: point 0: field 2 is empty"),
+            (b"1,2,3\n,2,3\n", "t.xyz:2: point 1: field 1 is empty"),
+            (b"1,2,3\n1,2\n", "t.xyz:2: point 1: needs 3 coordinates, found 2"),
             (b"1 2 3\nx y z\n", "t.xyz:2: point 1: bad number 'x'"),
             (b"x y\n1 2 3\n", "t.xyz:1: point 0: bad number 'x'"),
             (b"x 2 z\n1 2 3\n", "t.xyz:1: point 0: bad number 'x'"),

@@ -432,8 +432,10 @@ pub struct PreparedCloud {
     /// their 8 nearest other points lie within [`UNRESOLVED_SHARE`] of the frame's
     /// radius, i.e. at the f32 resolution every later stage works in. A cloud that
     /// spans too many orders of magnitude (two objects 1e9 apart, a few points at 1e30
-    /// beside a unit-sized bulk) has such points: its small parts collapse (and are
-    /// merged as near-duplicates), and their faces are lost.
+    /// beside a unit-sized bulk) has such points: at f32 resolution its small parts
+    /// collapse, so they are left out (isolated in the output, like far outliers; since
+    /// session 27: before, faces proposed over the collapsed positions came out wrong),
+    /// and their faces are lost. Fewer than 4 points left is an error.
     pub unresolved: usize,
     /// The first such point's input index.
     pub first_unresolved: Option<usize>,
@@ -490,6 +492,31 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
     let reach = reach_of(&knn, local.len());
     let lost: Vec<usize> = (0..local.len()).filter(|&i| (reach[i] as f64) < UNRESOLVED_SHARE).collect();
     let (unresolved, first_unresolved) = (lost.len(), lost.iter().map(|&i| distinct[i] as usize).min());
+    let (mut knn, mut reach) = (knn, reach);
+    if !lost.is_empty() {
+        // Left out like far outliers: at f32 resolution their positions collapse onto
+        // a few values, and the faces proposed over them are wrong (inverted, folded).
+        let mut out = vec![false; distinct.len()];
+        lost.iter().for_each(|&j| out[j] = true);
+        distinct = distinct.iter().zip(&out).filter(|(_, &o)| !o).map(|(&i, _)| i).collect();
+        if distinct.len() < 4 {
+            return Err(Error::invalid(format!(
+                "point cloud: {unresolved} of its {} distinct points lie closer together than the \
+                 normalised frame resolves (their 8 nearest neighbours within {UNRESOLVED_SHARE:.1e} \
+                 of the cloud's radius: f32 precision), leaving {} (at least 4 are needed); the \
+                 first is point {} (counting from 0). The cloud spans too many orders of magnitude \
+                 (parts far apart): reconstruct its parts separately",
+                unresolved + distinct.len(),
+                distinct.len(),
+                first_unresolved.unwrap_or(0)
+            )));
+        }
+        uniq = distinct.iter().map(|&i| points[i as usize]).collect();
+        frame = Frame::fit(&uniq)?;
+        local = frame.to_local_all(&uniq);
+        knn = crate::pipeline::candidates::knn_table(&local, NEAR_K);
+        reach = reach_of(&knn, local.len());
+    }
     if merge_share > 0.0 {
         let roots = near_duplicate_roots_with(&knn, &reach, merge_share);
         if roots.iter().enumerate().any(|(i, &r)| r as usize != i) {
@@ -503,7 +530,7 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
             local = frame.to_local_all(&uniq);
         }
     }
-    let duplicates = points.len() - distinct.len() - outliers;
+    let duplicates = points.len() - distinct.len() - outliers - unresolved;
     Ok(PreparedCloud {
         distinct,
         uniq,

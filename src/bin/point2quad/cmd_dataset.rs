@@ -237,8 +237,10 @@ pub fn run(argv: &[String]) -> Result<()> {
     };
     check_noise(CMD, &noise)?;
     let mut jobs: Vec<Job> = (0..synthetic).map(Job::Synthetic).collect();
+    let mut not_files = Vec::new();
     if let Some(dir) = args.value("--meshes") {
-        let files = mesh_files(Path::new(dir))?;
+        let files;
+        (files, not_files) = mesh_files(Path::new(dir))?;
         let stems: Vec<String> =
             files.iter().map(|p| sanitize(&p.file_stem().unwrap_or_default().to_string_lossy())).collect();
         let mut taken: std::collections::HashSet<String> = std::collections::HashSet::new();
@@ -313,7 +315,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
     let total = jobs.len();
     let done = AtomicUsize::new(0);
-    let results: Vec<Result<Option<String>>> = par::map(total, |k| {
+    let results: Vec<Result<Option<(String, String)>>> = par::map(total, |k| {
         // A noise variant builds its job's mesh exactly as that job does, then draws
         // the noise from a stream of its own.
         let (k, variant) = match jobs[k] {
@@ -372,6 +374,21 @@ pub fn run(argv: &[String]) -> Result<()> {
             }
             (Err(e), Job::Synthetic(_) | Job::Variant(..)) => return Err(e),
         };
+        // A mesh none of whose faces is a candidate (all corners on a line, say) would
+        // be a sample of negatives only (session 27's audit: such samples were written).
+        if let Job::File(path, _) | Job::Coarse(path, _, _) | Job::Stretch(path, _, _) = &jobs[k] {
+            if !sample.labels.iter().any(|&l| l != 0) {
+                let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                say!(
+                    "[{n}/{total}] warning: skipping {}{}: none of its {} faces is among the {} candidates (degenerate faces?)",
+                    path.display(),
+                    variant.map(|v| format!(" (noise draw {v})")).unwrap_or_default(),
+                    mesh.quads.len(),
+                    sample.candidates.len()
+                );
+                return Ok(None);
+            }
+        }
         let file = format!("{name}.{EXTENSION}");
         save_sample(&out.join(&file), &sample)?;
         let n = done.fetch_add(1, Ordering::Relaxed) + 1;
@@ -381,17 +398,41 @@ pub fn run(argv: &[String]) -> Result<()> {
             sample.candidates.len(),
             sample.coverage()
         );
-        Ok(Some(index_line(&file, &sample)))
+        Ok(Some((index_line(&file, &sample), file)))
     });
+    for p in &not_files {
+        say!("warning: skipping {}: {}", p.display(), not_a_file(p));
+    }
     let mut index = String::from("# file\tpoints\tcandidates\tpositives\tcoverage\n");
-    let mut written = 0;
+    let mut files = Vec::new();
+    let mut failed = None;
     for r in results {
-        if let Some(line) = r? {
-            index.push_str(&line);
-            index.push('\n');
-            written += 1;
+        match r {
+            Ok(Some((line, file))) => {
+                index.push_str(&line);
+                index.push('\n');
+                files.push(file);
+            }
+            Ok(None) => {}
+            Err(e) => failed = failed.or(Some(e)),
         }
     }
+    // All or nothing (session 27's audit: a sample that failed to write left the others
+    // and no index, and the folder then refused a rerun): what this run wrote goes.
+    let undo = |files: &[String]| {
+        for f in files {
+            let _ = std::fs::remove_file(out.join(f));
+        }
+        if made_out {
+            let _ = std::fs::remove_dir(&out);
+        }
+    };
+    if let Some(e) = failed {
+        undo(&files);
+        return Err(e);
+    }
+    let written = files.len();
+    let total = total + not_files.len();
     if written == 0 {
         // Every mesh was skipped: an empty dataset only fails later, in `train`. The
         // folder goes too if this run made it (`remove_dir` leaves a non-empty one).
@@ -403,26 +444,47 @@ pub fn run(argv: &[String]) -> Result<()> {
         )));
     }
     let index_path = out.join("index.txt");
-    point2quad::io::atomic::write_atomic(&index_path, |w| {
+    if let Err(e) = point2quad::io::atomic::write_atomic(&index_path, |w| {
         w.write_all(index.as_bytes()).map_err(|e| Error::io(&index_path, e))
-    })?;
+    }) {
+        undo(&files);
+        return Err(e);
+    }
     say!("dataset: {written} samples in {} ({} skipped)", out.display(), total - written);
     Ok(())
 }
 
 /// The .obj/.off/.ply files directly in `dir`, sorted by name.
-fn mesh_files(dir: &Path) -> Result<Vec<PathBuf>> {
+/// Entries with a mesh extension that are not regular files (a folder, a broken link)
+/// come back apart, sorted, to be skipped with a warning (session 27's audit: they were
+/// skipped without a word).
+fn mesh_files(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PathBuf>)> {
     let entries = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
-    let mut files = Vec::new();
+    let (mut files, mut others) = (Vec::new(), Vec::new());
     for entry in entries {
         let path = entry.map_err(|e| Error::io(dir, e))?.path();
         let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
-        if path.is_file() && matches!(ext.as_deref(), Some("obj" | "off" | "ply")) {
-            files.push(path);
+        if matches!(ext.as_deref(), Some("obj" | "off" | "ply")) {
+            if path.is_file() {
+                files.push(path);
+            } else {
+                others.push(path);
+            }
         }
     }
     files.sort();
-    Ok(files)
+    others.sort();
+    Ok((files, others))
+}
+
+/// Why a mesh-named entry that is not a regular file is skipped.
+fn not_a_file(path: &Path) -> &'static str {
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_dir() => "a folder, not a mesh file",
+        Ok(_) => "not a regular file",
+        Err(_) if std::fs::symlink_metadata(path).is_ok() => "a link to nothing",
+        Err(_) => "cannot be read",
+    }
 }
 
 /// Reads a mesh file as a pure-quad mesh with at least one face; the message names
@@ -435,6 +497,17 @@ fn load_quads(path: &Path) -> std::result::Result<QuadMesh, String> {
         // Regression: a vertices-only .ply failed the whole run ("pts: the mesh has no
         // faces", naming no file) instead of being skipped like other unusable meshes.
         return Err(format!("{}: no faces (a point cloud, not a mesh)", path.display()));
+    }
+    // A face that repeats a corner (`f 1 1 2 5`) is no quad: its label would teach the
+    // classifier a shape no candidate has (session 27's audit: such meshes were taken).
+    let repeats = |q: &[u32; 4]| (0..4).any(|i| (i + 1..4).any(|j| q[i] == q[j]));
+    if let Some(f) = mesh.quads.iter().position(repeats) {
+        let n = mesh.quads.iter().filter(|q| repeats(q)).count();
+        return Err(format!(
+            "{}: {n} face(s) repeat a corner, so they are not quads; the first is face {} (counting from 1)",
+            path.display(),
+            f + 1
+        ));
     }
     Ok(mesh)
 }

@@ -192,6 +192,23 @@ pub fn run(argv: &[String]) -> Result<()> {
             )));
         }
     }
+    // The rescue takes candidates scored at most the threshold (session 27's audit: a
+    // higher bound rescued nothing, without a word).
+    if a.value("--rescue-min-prob").is_some() && pp.rescue.min_prob > cfg.threshold {
+        return Err(Error::Usage(format!(
+            "{cmd}: --rescue-min-prob {} is above the threshold {}: the rescue takes candidates \
+             scored at most the threshold, so it would rescue none; give a lower bound, or --no-rescue",
+            pp.rescue.min_prob, cfg.threshold
+        )));
+    }
+    // `--no-close` turns the seal and the untangling off with the closing.
+    for opt in ["--no-seal", "--no-untangle"] {
+        if a.switch("--no-close") && a.switch(opt) {
+            return Err(Error::Usage(format!(
+                "{cmd}: {opt} has no effect with --no-close (which turns it off too); give one of them"
+            )));
+        }
+    }
     if !cfg.run_postprocess {
         let valued = [
             "--max-floater-faces",
@@ -464,7 +481,7 @@ pub fn hygiene_notes(cmd: &str, input: &std::path::Path, points: &[[f64; 3]], h:
         crate::output::stderr(&format!(
             "{cmd}: warning: {}: {} point(s) lie closer together than the normalised frame resolves \
              (their 8 nearest neighbours within 1e-6 of the cloud's radius: f32 precision), so \
-             their part of the cloud collapses and its faces are lost; the first is point {i} \
+             they are left out (isolated in the output) and their part's faces are lost; the first is point {i} \
              (counting from 0) at {:?}. The cloud spans too many orders of magnitude (parts far \
              apart, or far points beside a small bulk): reconstruct its parts separately\n",
             input.display(),

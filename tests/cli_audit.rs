@@ -64,6 +64,17 @@ fn xyz(pts: &[[f64; 3]]) -> Vec<u8> {
 }
 
 /// The `f` lines of an OBJ file.
+/// A 4 × 4 point grid's 9 quads, as OBJ text.
+fn grid_obj() -> String {
+    (0..16).map(|i| format!("v {} {} 0\n", i % 4, i / 4)).collect::<String>()
+        + &(0..9)
+            .map(|c| {
+                let v = (c / 3) * 4 + c % 3 + 1;
+                format!("f {} {} {} {}\n", v, v + 1, v + 5, v + 4)
+            })
+            .collect::<String>()
+}
+
 fn faces(obj: &str) -> Vec<String> {
     std::fs::read_to_string(obj)
         .expect("test: read output")
@@ -444,13 +455,7 @@ fn dataset_skips_zero_area_meshes_and_refuses_a_folder_with_samples() {
     std::fs::create_dir(&meshes).expect("test: mkdir");
     let flat: String = (0..8).map(|i| format!("v {i} 0 0\n")).collect::<String>() + "f 1 2 3 4\nf 5 6 7 8\n";
     std::fs::write(meshes.join("flat.obj"), flat).expect("test: write");
-    let grid: String = (0..16).map(|i| format!("v {} {} 0\n", i % 4, i / 4)).collect::<String>()
-        + &(0..9)
-            .map(|c| {
-                let v = (c / 3) * 4 + c % 3 + 1;
-                format!("f {} {} {} {}\n", v, v + 1, v + 5, v + 4)
-            })
-            .collect::<String>();
+    let grid = grid_obj();
     std::fs::write(meshes.join("grid.obj"), grid).expect("test: write");
     let out = dir.p("data");
     let m = meshes.display().to_string();
@@ -844,13 +849,7 @@ fn dataset_is_all_or_nothing_and_names_what_it_skips() {
     // (2) and (3).
     let meshes = dir.path("meshes");
     std::fs::create_dir(&meshes).expect("test: mkdir");
-    let grid: String = (0..16).map(|i| format!("v {} {} 0\n", i % 4, i / 4)).collect::<String>()
-        + &(0..9)
-            .map(|c| {
-                let v = (c / 3) * 4 + c % 3 + 1;
-                format!("f {} {} {} {}\n", v, v + 1, v + 5, v + 4)
-            })
-            .collect::<String>();
+    let grid = grid_obj();
     std::fs::write(meshes.join("grid.obj"), &grid).expect("test: write");
     std::fs::write(meshes.join("repeat.obj"), format!("{grid}f 1 1 2 5\n")).expect("test: write");
     let line: String = (0..4).map(|i| format!("v {i} 0 0\n")).collect::<String>() + "f 1 2 3 4\n";

@@ -72,11 +72,13 @@ OPTIONS:
                       as `reconstruct --per-point` (1 to 1024) [32]; a model
                       trained on such data wants the same value at reconstruct
 
-At least one of --synthetic and --meshes is needed. A mesh that cannot be read, is
-not pure-quad or has no faces is skipped with a warning naming it; the run fails if a
-sample cannot be written. Progress goes to stderr, one line per sample. Sample k
-(synthetic first, then the meshes in name order) uses its own random stream derived
-from the seed and k.
+At least one of --synthetic and --meshes is needed. A mesh that cannot be read (a
+folder or a broken link named like one too), is not pure-quad, has no faces, has a
+face that repeats a corner, or none of whose faces is among its candidates is skipped
+with a warning naming it. The run fails if a sample cannot be written, and then
+removes the samples it wrote (and --out, if it made it). Progress goes to stderr, one
+line per sample. Sample k (synthetic first, then the meshes in name order) uses its
+own random stream derived from the seed and k.
 ";
 
 /// Largest `--synthetic`: each sample costs about a second on two cores and writes a

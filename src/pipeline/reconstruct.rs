@@ -478,9 +478,7 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
     let far = far_outliers(&distinct.iter().map(|&i| points[i as usize]).collect::<Vec<_>>());
     let (outliers, first_outlier) = (far.len(), far.iter().map(|&j| distinct[j] as usize).min());
     if !far.is_empty() {
-        let mut out = vec![false; distinct.len()];
-        far.iter().for_each(|&j| out[j] = true);
-        distinct = distinct.iter().zip(&out).filter(|(_, &o)| !o).map(|(&i, _)| i).collect();
+        distinct = without(&distinct, &far);
         if distinct.len() < 4 {
             return Err(too_few(distinct.len()));
         }
@@ -496,9 +494,7 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
     if !lost.is_empty() {
         // Left out like far outliers: at f32 resolution their positions collapse onto
         // a few values, and the faces proposed over them are wrong (inverted, folded).
-        let mut out = vec![false; distinct.len()];
-        lost.iter().for_each(|&j| out[j] = true);
-        distinct = distinct.iter().zip(&out).filter(|(_, &o)| !o).map(|(&i, _)| i).collect();
+        distinct = without(&distinct, &lost);
         if distinct.len() < 4 {
             return Err(Error::invalid(format!(
                 "point cloud: {unresolved} of its {} distinct points lie closer together than the \
@@ -514,8 +510,11 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
         uniq = distinct.iter().map(|&i| points[i as usize]).collect();
         frame = Frame::fit(&uniq)?;
         local = frame.to_local_all(&uniq);
-        knn = crate::pipeline::candidates::knn_table(&local, NEAR_K);
-        reach = reach_of(&knn, local.len());
+        // The neighbour table serves the near-duplicate merge alone.
+        if merge_share > 0.0 {
+            knn = crate::pipeline::candidates::knn_table(&local, NEAR_K);
+            reach = reach_of(&knn, local.len());
+        }
     }
     if merge_share > 0.0 {
         let roots = near_duplicate_roots_with(&knn, &reach, merge_share);
@@ -542,6 +541,13 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
         unresolved,
         first_unresolved,
     })
+}
+
+/// `list` without its entries at the positions `drop` (positions into `list`), in order.
+fn without(list: &[u32], drop: &[usize]) -> Vec<u32> {
+    let mut out = vec![false; list.len()];
+    drop.iter().for_each(|&j| out[j] = true);
+    list.iter().zip(&out).filter(|(_, &o)| !o).map(|(&i, _)| i).collect()
 }
 
 /// A model whose output is not a probability (NaN or infinite: diverged or damaged

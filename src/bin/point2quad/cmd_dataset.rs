@@ -116,6 +116,16 @@ enum Job {
     Variant(usize, usize),
 }
 
+impl Job {
+    /// The mesh file a file-based job reads.
+    fn mesh_path(&self) -> Option<&Path> {
+        match self {
+            Job::File(path, _) | Job::Coarse(path, _, _) | Job::Stretch(path, _, _) => Some(path),
+            Job::Synthetic(_) | Job::Variant(..) => None,
+        }
+    }
+}
+
 /// The comma-separated numbers of `--{flag}` (at most `MAX_COPIES`), each
 /// checked by `ok` (which says what it wants); empty without the option. They need
 /// `--meshes`.
@@ -317,6 +327,11 @@ pub fn run(argv: &[String]) -> Result<()> {
     std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
     let total = jobs.len();
     let done = AtomicUsize::new(0);
+    // A warning that a job is skipped, counted in the progress.
+    let skip = |why: std::fmt::Arguments| {
+        let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+        say!("[{n}/{total}] warning: skipping {why}");
+    };
     let results: Vec<Result<Option<(String, String)>>> = par::map(total, |k| {
         // A noise variant builds its job's mesh exactly as that job does, then draws
         // the noise from a stream of its own.
@@ -330,8 +345,7 @@ pub fn run(argv: &[String]) -> Result<()> {
                 let mesh = match load_quads(path) {
                     Ok(mesh) => mesh,
                     Err(msg) => {
-                        let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-                        say!("[{n}/{total}] warning: skipping {msg}");
+                        skip(format_args!("{msg}"));
                         return Ok(None);
                     }
                 };
@@ -358,12 +372,11 @@ pub fn run(argv: &[String]) -> Result<()> {
             Some(v) => (format!("{name}{VARIANT_SEP}{v}"), variant_rng(seed, k, v)),
             None => (name, rng),
         };
-        let sample = match (build_sample(&name, &mesh, &noise, &cand_cfg, &mut rng), &jobs[k]) {
+        let sample = match (build_sample(&name, &mesh, &noise, &cand_cfg, &mut rng), jobs[k].mesh_path()) {
             (Ok(s), _) => s,
             // A mesh file that loads but cannot make a sample (e.g. every face has zero
             // area, so no noise point can be placed) is skipped like any unusable file.
-            (Err(e), Job::File(path, _) | Job::Coarse(path, _, _) | Job::Stretch(path, _, _)) => {
-                let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+            (Err(e), Some(path)) => {
                 let why = match e {
                     Error::InvalidInput(m) => m,
                     other => other.to_string(),
@@ -371,23 +384,22 @@ pub fn run(argv: &[String]) -> Result<()> {
                 // build_sample's message starts with the sample's name; the path says more.
                 let why = why.strip_prefix(&format!("{name}: ")).unwrap_or(&why);
                 let why = why.strip_prefix("invalid input: ").unwrap_or(why);
-                say!("[{n}/{total}] warning: skipping {}: {why}", path.display());
+                skip(format_args!("{}: {why}", path.display()));
                 return Ok(None);
             }
-            (Err(e), Job::Synthetic(_) | Job::Variant(..)) => return Err(e),
+            (Err(e), None) => return Err(e),
         };
         // A mesh none of whose faces is a candidate (all corners on a line, say) would
         // be a sample of negatives only (session 27's audit: such samples were written).
-        if let Job::File(path, _) | Job::Coarse(path, _, _) | Job::Stretch(path, _, _) = &jobs[k] {
+        if let Some(path) = jobs[k].mesh_path() {
             if !sample.labels.iter().any(|&l| l != 0) {
-                let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-                say!(
-                    "[{n}/{total}] warning: skipping {}{}: none of its {} faces is among the {} candidates (degenerate faces?)",
+                skip(format_args!(
+                    "{}{}: none of its {} faces is among the {} candidates (degenerate faces?)",
                     path.display(),
                     variant.map(|v| format!(" (noise draw {v})")).unwrap_or_default(),
                     mesh.quads.len(),
                     sample.candidates.len()
-                );
+                ));
                 return Ok(None);
             }
         }

@@ -191,6 +191,80 @@ proptest! {
         prop_assert_eq!(s.get(bn.running_mean), &rmv);
     }
 
+    /// An inference graph asked for batch statistics (`with_batch_stats`, what a
+    /// `cloud_batch_stats` model scores with) normalises with the rows' own mean and
+    /// biased variance (brute force here) when there are ≥ 2 rows and with the running
+    /// statistics for one row; it never moves the running statistics. Recorded, its
+    /// outputs and gradients equal a train graph's (the same statistics, the same rule).
+    #[test]
+    fn batch_norm_eval_with_batch_stats(m in 1usize..10, c in 1usize..6, seed in 0u64..1000) {
+        let mut rng = Rng::new(seed);
+        let mut s = ParamStore::new();
+        let bn = BatchNorm1d::new(&mut s, "bn", c, BatchNormConfig::default()).unwrap();
+        let (gm, bt) = (uniform(&[c], 0.5, 1.5, &mut rng), uniform(&[c], -1.0, 1.0, &mut rng));
+        let (rmv, rvv) = (uniform(&[c], -1.0, 1.0, &mut rng), uniform(&[c], 0.2, 2.0, &mut rng));
+        *s.get_mut(bn.weight) = gm.clone();
+        *s.get_mut(bn.bias) = bt.clone();
+        *s.get_mut(bn.running_mean) = rmv.clone();
+        *s.get_mut(bn.running_var) = rvv.clone();
+        let x = uniform(&[m, c], -2.0, 2.0, &mut rng);
+        let xd = x.data();
+        let got = {
+            let mut g = Graph::eval(&mut s).with_batch_stats(true);
+            let xv = g.input(x.clone());
+            let y = bn.forward(&mut g, xv).unwrap();
+            g.value(y).clone()
+        };
+        for j in 0..c {
+            let (mean, var) = if m >= 2 {
+                let mean = (0..m).map(|i| xd[i * c + j] as f64).sum::<f64>() / m as f64;
+                (mean, (0..m).map(|i| (xd[i * c + j] as f64 - mean).powi(2)).sum::<f64>() / m as f64)
+            } else {
+                (rmv.data()[j] as f64, rvv.data()[j] as f64)
+            };
+            for i in 0..m {
+                let want = (xd[i * c + j] as f64 - mean) / (var + 1e-5).sqrt() * gm.data()[j] as f64 + bt.data()[j] as f64;
+                prop_assert!((got.data()[i * c + j] as f64 - want).abs() < 1e-4 * (1.0 + want.abs()), "row {} col {}", i, j);
+            }
+        }
+        prop_assert_eq!(s.get(bn.running_mean), &rmv);
+        prop_assert_eq!(s.get(bn.running_var), &rvv);
+        // Without the switch the same graph reads the running statistics: the check
+        // above can tell the two apart.
+        if m >= 2 {
+            let plain = {
+                let mut g = Graph::eval(&mut s);
+                let xv = g.input(x.clone());
+                let y = bn.forward(&mut g, xv).unwrap();
+                g.value(y).clone()
+            };
+            prop_assert!(max_diff(plain.data(), got.data()) > 1e-4);
+        }
+        // Recorded: outputs and gradients as a train graph's.
+        prop_assume!(m >= 2);
+        let xid = s.add("x", ParamKind::Trainable, x.clone()).unwrap();
+        let w = uniform(&[m, c], -1.0, 1.0, &mut rng);
+        let run = |s: &mut ParamStore, train: bool| {
+            let mut grads = Grads::new();
+            let mut g = Graph::new(s, true, train).with_batch_stats(true);
+            let xv = g.param(xid);
+            let y = bn.forward(&mut g, xv).unwrap();
+            let wv = g.input(w.clone());
+            let p = g.mul(y, wv).unwrap();
+            let l = g.sum(p).unwrap();
+            let out = g.value(y).clone();
+            g.backward(l, &mut grads).unwrap();
+            (out, [xid, bn.weight, bn.bias].map(|id| grads.get(id).unwrap().clone()))
+        };
+        let (ye, ge) = run(&mut s, false);
+        prop_assert_eq!(s.get(bn.running_mean), &rmv);
+        let (yt, gt) = run(&mut s, true);
+        prop_assert!(max_diff(ye.data(), yt.data()) == 0.0);
+        for (a, b) in ge.iter().zip(&gt) {
+            prop_assert!(max_diff(a.data(), b.data()) == 0.0);
+        }
+    }
+
     #[test]
     fn residual_block_grads(m in 3usize..8, w in 1usize..5, seed in 0u64..1000) {
         let mut rng = Rng::new(seed);

@@ -75,6 +75,15 @@ pub struct ModelConfig {
     /// What the refinement rounds read (`refine_input` in the text form; absent =
     /// [`RefineInput::Base`], which every model refined before session 18 has).
     pub refine_input: RefineInput,
+    /// Batch norm at inference reads the statistics of the cloud being scored (all its
+    /// candidates in one batch, and all its points in the point encoder) instead of the
+    /// running averages from training ([`Graph::with_batch_stats`]). Training draws one
+    /// cloud a step, so each step's statistics are one cloud's; running averages over
+    /// many clouds fit none of them well, which the point encoder's features show most
+    /// (docs/EXPERIMENTS.md, sessions 27 and 28). The cost: a cloud's candidates are
+    /// scored in one batch, not in chunks. `cloud_batch_stats = true` in the text form,
+    /// written only when set (files without it read the running averages).
+    pub cloud_batch_stats: bool,
 }
 
 impl ModelConfig {
@@ -97,6 +106,7 @@ impl ModelConfig {
             refine_widths: Vec::new(),
             refine_sides: SideRule::Direction,
             refine_input: RefineInput::Base,
+            cloud_batch_stats: false,
         }
     }
 
@@ -120,6 +130,7 @@ impl ModelConfig {
             refine_widths: Vec::new(),
             refine_sides: SideRule::Direction,
             refine_input: RefineInput::Base,
+            cloud_batch_stats: false,
         }
     }
 
@@ -127,7 +138,9 @@ impl ModelConfig {
     /// 10,000-point cloud stays well under a second on two cores: 3 levels (cells 0.03
     /// nominal, 0.06, 0.12), blocks simple, resnetb, (strided, resnetb) ×2, widths
     /// 16 → 64, 15 rigid kernel points, d_P = 32, batch-norm momentum 0.1 like the face
-    /// net.
+    /// net. Batch norm is read with each cloud's own statistics at inference
+    /// ([`ModelConfig::cloud_batch_stats`]): with the running averages its validation
+    /// precision swings from epoch to epoch (session 27).
     pub fn default_kp() -> ModelConfig {
         let d_p = 32;
         ModelConfig {
@@ -139,6 +152,7 @@ impl ModelConfig {
                 bn_momentum: 0.1,
                 ..KpfcnnConfig::default_preset()
             }),
+            cloud_batch_stats: true,
             ..ModelConfig::default_preset()
         }
     }
@@ -262,6 +276,9 @@ impl ModelConfig {
         if self.sign_free_normals {
             t += "sign_free_normals = true\n";
         }
+        if self.cloud_batch_stats {
+            t += "cloud_batch_stats = true\n";
+        }
         if self.refine_rounds > 0 {
             t += &format!(
                 "refine_rounds = {}\nrefine_widths = {}\n",
@@ -348,6 +365,10 @@ impl ModelConfig {
                 "local_frame" => c.local_frame = v.parse().map_err(|_| bad("bad bool"))?,
                 "sign_free_normals" => {
                     c.sign_free_normals = v.parse().map_err(|_| bad("bad bool"))?;
+                    optional_seen += 1;
+                }
+                "cloud_batch_stats" => {
+                    c.cloud_batch_stats = v.parse().map_err(|_| bad("bad bool"))?;
                     optional_seen += 1;
                 }
                 "face_in" => face_in = Some(int(v)?),
@@ -600,13 +621,17 @@ impl Model {
     /// row is scored on its own (batch norm reads its running statistics), so the
     /// result does not depend on the chunking, and memory holds one chunk's
     /// activations instead of every candidate's (a 200,000-point cloud has 1.6M
-    /// candidates).
+    /// candidates). A [`ModelConfig::cloud_batch_stats`] model scores all rows in one
+    /// batch, whatever `chunk` says.
     fn classify_in_chunks(&self, face_features: &[f32], chunk: usize) -> Result<Vec<f32>> {
         let m = self.rows(face_features)?;
         let fin = self.net.config.face_in();
+        let cloud = self.net.config.cloud_batch_stats;
+        // Batch norm on the cloud's statistics: every row in one batch.
+        let chunk = if cloud { m } else { chunk };
         let mut out = Vec::with_capacity(m);
         for rows in face_features.chunks(chunk.max(1) * fin) {
-            let mut g = Graph::eval_shared(&self.params);
+            let mut g = Graph::eval_shared(&self.params).with_batch_stats(cloud);
             let x = g.input(Tensor::new(&[rows.len() / fin, fin], self.framed(rows.to_vec()))?);
             let logits = self.net.forward(&mut g, x, None)?;
             out.extend(probabilities(g.value(logits).data()));
@@ -727,7 +752,7 @@ impl Model {
             return Ok(Vec::new());
         }
         let pyr = prepare(points, kp.config())?;
-        let mut g = Graph::eval_shared(&self.params);
+        let mut g = Graph::eval_shared(&self.params).with_batch_stats(self.net.config.cloud_batch_stats);
         let pf = kp.forward(&mut g, &pyr)?;
         let x = g.input(Tensor::new(&[m, self.net.config.face_in()], self.framed(face_features.to_vec()))?);
         let logits = self.net.forward_points_eval(&mut g, x, pf, corners)?;
@@ -1080,6 +1105,20 @@ mod tests {
             p
         )
         .is_err());
+        // `cloud_batch_stats` likewise: set in `default_kp` only, and a `default_kp` file
+        // from before it existed reads the running statistics.
+        assert!(
+            !def.contains("cloud_batch_stats") && !ModelConfig::paper().to_text().contains("cloud_batch")
+        );
+        let kp_text = ModelConfig::default_kp().to_text();
+        assert!(kp_text.contains("cloud_batch_stats = true\n"), "{kp_text}");
+        assert_eq!(ModelConfig::from_text(&kp_text, p).unwrap(), ModelConfig::default_kp());
+        assert_eq!(
+            ModelConfig::from_text(&kp_text.replace("cloud_batch_stats = true\n", ""), p).unwrap(),
+            ModelConfig { cloud_batch_stats: false, ..ModelConfig::default_kp() }
+        );
+        assert!(ModelConfig::from_text(&kp_text.replace("stats = true", "stats = 1"), p).is_err());
+        assert!(ModelConfig::from_text(&format!("{kp_text}cloud_batch_stats = true\n"), p).is_err());
         // Point-encoder keys: all needed with point_dim > 0, none allowed without, each
         // value checked.
         let kp = ModelConfig::default_kp().to_text();
@@ -1134,6 +1173,48 @@ mod tests {
                 assert!(worst <= 1e-6, "m {m}, chunk {chunk}: {worst}");
             }
         }
+    }
+
+    /// A `cloud_batch_stats` model scores all rows in one batch whatever the chunk size,
+    /// with batch norm on those rows' statistics: the same probabilities as the train
+    /// graph's forward pass (which uses batch statistics too), and not those of the same
+    /// weights read with their running statistics. Its running statistics stay as they
+    /// were.
+    #[test]
+    fn cloud_batch_stats_score_the_whole_cloud_at_once() {
+        let mut rng = Rng::new(8);
+        let cfg = ModelConfig { cloud_batch_stats: true, ..ModelConfig::default_preset() };
+        let mut model = Model::new(cfg, 5).unwrap();
+        // Running statistics away from the batch's.
+        for id in model.params.ids().collect::<Vec<_>>() {
+            if model.params.name(id).contains("running_mean") {
+                model.params.get_mut(id).data_mut().iter_mut().for_each(|x| *x = 0.7);
+            }
+        }
+        let before = model.params.clone();
+        let fin = model.config().face_in();
+        let m = 300;
+        let x: Vec<f32> = (0..m * fin).map(|_| rng.f32() * 2.0 - 1.0).collect();
+        let whole = model.classify_in_chunks(&x, usize::MAX / fin).unwrap();
+        for chunk in [1, 7, 128] {
+            assert_eq!(model.classify_in_chunks(&x, chunk).unwrap(), whole, "chunk {chunk}");
+        }
+        let want = {
+            let mut params = model.params.clone();
+            let mut g = Graph::new(&mut params, false, true);
+            let xv = g.input(Tensor::new(&[m, fin], model.framed(x.clone())).unwrap());
+            let logits = model.net.forward(&mut g, xv, None).unwrap();
+            probabilities(g.value(logits).data())
+        };
+        let worst = whole.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        assert!(worst <= 1e-5, "{worst}");
+        for id in model.params.ids() {
+            assert_eq!(model.params.get(id), before.get(id), "{}", model.params.name(id));
+        }
+        model.net.config.cloud_batch_stats = false;
+        let other = model.classify_in_chunks(&x, usize::MAX / fin).unwrap();
+        let diff = other.iter().zip(&whole).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        assert!(diff > 1e-3, "the check could not fail: {diff}");
     }
 
     /// The shipped weights (the `default` preset reading normals without their signs,
@@ -1458,20 +1539,27 @@ mod tests {
                     }
                 }
             }
-            let fast = m.predict_with_points(&pts, &corners, &feats).unwrap();
-            let kp = m.net.point_encoder().unwrap();
-            let pyr = prepare(&pts, kp.config()).unwrap();
-            let mut g = Graph::eval_shared(&m.params);
-            let pf = kp.forward(&mut g, &pyr).unwrap();
-            // The rows as training feeds them (in the candidate's frame for this preset).
-            let x = g.input(Tensor::new(&[mc, fin], m.framed(feats.clone())).unwrap());
-            let logits = m.net.forward(&mut g, x, Some((pf, corner_indices(&corners)))).unwrap();
-            let slow = probabilities(g.value(logits).data());
-            assert_eq!(fast.len(), slow.len());
-            let worst = fast.iter().zip(&slow).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
-            assert!(worst < 1e-6, "seed {seed}: factored and gathered inference differ by {worst}");
-            // And the probabilities are not all saturated (the check would be vacuous).
-            assert!(slow.iter().any(|&p| p > 0.01 && p < 0.99));
+            // Running statistics, and each cloud's own (`default_kp`'s setting).
+            for cloud in [false, true] {
+                m.net.config.cloud_batch_stats = cloud;
+                let fast = m.predict_with_points(&pts, &corners, &feats).unwrap();
+                let kp = m.net.point_encoder().unwrap();
+                let pyr = prepare(&pts, kp.config()).unwrap();
+                let mut g = Graph::eval_shared(&m.params).with_batch_stats(cloud);
+                let pf = kp.forward(&mut g, &pyr).unwrap();
+                // The rows as training feeds them (in the candidate's frame for this preset).
+                let x = g.input(Tensor::new(&[mc, fin], m.framed(feats.clone())).unwrap());
+                let logits = m.net.forward(&mut g, x, Some((pf, corner_indices(&corners)))).unwrap();
+                let slow = probabilities(g.value(logits).data());
+                assert_eq!(fast.len(), slow.len());
+                let worst = fast.iter().zip(&slow).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+                assert!(
+                    worst < 1e-6,
+                    "seed {seed}, cloud {cloud}: factored and gathered inference differ by {worst}"
+                );
+                // And the probabilities are not all saturated (the check would be vacuous).
+                assert!(slow.iter().any(|&p| p > 0.01 && p < 0.99));
+            }
         }
     }
 }

@@ -83,6 +83,9 @@ pub struct Graph<'p> {
     nodes: Vec<Node>,
     record: bool,
     train: bool,
+    /// Outside train mode: batch norm reads the batch's own statistics (≥ 2 rows)
+    /// instead of the running ones, and updates nothing ([`Graph::with_batch_stats`]).
+    batch_stats: bool,
     spent: bool,
 }
 
@@ -174,7 +177,14 @@ impl<'p> Graph<'p> {
     /// A graph over `params`. `record`: keep ops for `backward`; `train`: batch norm
     /// uses (and updates) batch statistics, dropout is active.
     pub fn new(params: &'p mut ParamStore, record: bool, train: bool) -> Graph<'p> {
-        Graph { params: Store::Mut(params), nodes: Vec::new(), record, train, spent: false }
+        Graph {
+            params: Store::Mut(params),
+            nodes: Vec::new(),
+            record,
+            train,
+            batch_stats: false,
+            spent: false,
+        }
     }
 
     /// Training graph: records, batch statistics.
@@ -190,7 +200,26 @@ impl<'p> Graph<'p> {
     /// Inference graph over a shared store: like [`Graph::eval`], for a model that is
     /// only borrowed (`reconstruct(&Model)`), or used from several threads at once.
     pub fn eval_shared(params: &'p ParamStore) -> Graph<'p> {
-        Graph { params: Store::Shared(params), nodes: Vec::new(), record: false, train: false, spent: false }
+        Graph {
+            params: Store::Shared(params),
+            nodes: Vec::new(),
+            record: false,
+            train: false,
+            batch_stats: false,
+            spent: false,
+        }
+    }
+
+    /// Outside train mode, batch norm normalises with the statistics of the rows it is
+    /// given (when there are at least 2; one row reads the running statistics) instead
+    /// of the running averages, and leaves the running averages alone. For a model whose
+    /// batch norm is meant to be read per cloud
+    /// ([`crate::pipeline::model::ModelConfig::cloud_batch_stats`]). The result then
+    /// depends on which rows share a graph. In train mode batch statistics are used
+    /// anyway; this changes nothing there.
+    pub fn with_batch_stats(mut self, on: bool) -> Graph<'p> {
+        self.batch_stats = on;
+        self
     }
 
     /// True when ops are recorded for `backward`.
@@ -746,18 +775,22 @@ impl<'p> Graph<'p> {
         }
         let record = self.wants_grad(&vars);
         let wd = w.map(|w| self.value(w).data());
-        // Train mode: z and batch statistics (fused per row block), running update.
-        let (z, mean, invstd) = if self.train {
+        // Train mode (or batch statistics asked for): z and batch statistics (fused per
+        // row block); the running update in train mode only.
+        let batch = self.train || (self.batch_stats && m >= 2);
+        let (z, mean, invstd) = if batch {
             let (z, mean, var) = conv_bn::linear_stats(tx.data(), m, cin, wd, cout);
-            let mom = bn.momentum;
-            let unbias = m as f64 / (m as f64 - 1.0);
-            let rm = self.params.get_mut(bn.running_mean).data_mut();
-            for (r, &b) in rm.iter_mut().zip(&mean) {
-                *r = (1.0 - mom) * *r + mom * b as f32;
-            }
-            let rv = self.params.get_mut(bn.running_var).data_mut();
-            for (r, &b) in rv.iter_mut().zip(&var) {
-                *r = (1.0 - mom) * *r + mom * (b * unbias) as f32;
+            if self.train {
+                let mom = bn.momentum;
+                let unbias = m as f64 / (m as f64 - 1.0);
+                let rm = self.params.get_mut(bn.running_mean).data_mut();
+                for (r, &b) in rm.iter_mut().zip(&mean) {
+                    *r = (1.0 - mom) * *r + mom * b as f32;
+                }
+                let rv = self.params.get_mut(bn.running_var).data_mut();
+                for (r, &b) in rv.iter_mut().zip(&var) {
+                    *r = (1.0 - mom) * *r + mom * (b * unbias) as f32;
+                }
             }
             let eps = bn.eps as f64;
             let invstd = var.iter().map(|&v| (1.0 / (v + eps).sqrt()) as f32).collect::<Vec<f32>>();
@@ -792,7 +825,7 @@ impl<'p> Graph<'p> {
         let out_t = Tensor::new(&[m, cout], out)?;
         match z {
             Some(z) => {
-                let saved = ConvBnSaved { x, w, gamma, beta, act, batch_stats: self.train, z, mean, invstd };
+                let saved = ConvBnSaved { x, w, gamma, beta, act, batch_stats: batch, z, mean, invstd };
                 Ok(self.push(out_t, Op::ConvBnAct(Box::new(saved))))
             }
             None => Ok(self.push(out_t, Op::Leaf)),

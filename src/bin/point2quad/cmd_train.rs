@@ -29,7 +29,10 @@ OPTIONS:
                             default     face encoder + classifier (2-core friendly;
                                         the shipped weights)
                             default_kp  default + a small KPConv point encoder
-                                        (KPFCNN, 3 levels, 32 features per point)
+                                        (KPFCNN, 3 levels, 32 features per point);
+                                        its batch norm reads each cloud's own
+                                        statistics when scoring (validation,
+                                        refine, reconstruct)
                             paper       the paper's widths and KPFCNN (25.2M
                                         parameters; slow on a CPU)
                           (ignored with --resume: the checkpoint holds its config)

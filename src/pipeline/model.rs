@@ -621,22 +621,72 @@ impl Model {
     /// row is scored on its own (batch norm reads its running statistics), so the
     /// result does not depend on the chunking, and memory holds one chunk's
     /// activations instead of every candidate's (a 200,000-point cloud has 1.6M
-    /// candidates). A [`ModelConfig::cloud_batch_stats`] model scores all rows in one
-    /// batch, whatever `chunk` says.
+    /// candidates). A [`ModelConfig::cloud_batch_stats`] model: see [`Model::score_rows`].
     fn classify_in_chunks(&self, face_features: &[f32], chunk: usize) -> Result<Vec<f32>> {
+        self.score_rows(face_features, None, chunk, CLOUD_STATS_ROWS)
+    }
+
+    /// The classifier's probabilities for the rows of `face_features`; with `points`,
+    /// the per-point features already through the classifier's first layer
+    /// ([`Network::point_projection`]) and each row's corners. Chunks of at most `chunk`
+    /// rows, except for a [`ModelConfig::cloud_batch_stats`] model, whose batch norm
+    /// reads the statistics of the cloud's candidates: up to `stats_rows`
+    /// ([`CLOUD_STATS_ROWS`] outside tests) rows they are one batch; beyond, the
+    /// statistics are those of an even spread of `stats_rows` rows (row ⌊i·m/N⌋ for
+    /// i < N), and every row is then scored in
+    /// chunks with them, so memory stays bounded as with running statistics. (Training
+    /// draws at most 12,000 candidates of a cloud a step: its statistics were samples too.)
+    fn score_rows(
+        &self,
+        face_features: &[f32],
+        points: Option<(&[f32], &[[u32; 4]])>,
+        chunk: usize,
+        stats_rows: usize,
+    ) -> Result<Vec<f32>> {
         let m = self.rows(face_features)?;
+        let stats_rows = stats_rows.max(2);
         let fin = self.net.config.face_in();
         let cloud = self.net.config.cloud_batch_stats;
-        // Batch norm on the cloud's statistics: every row in one batch.
-        let chunk = if cloud { m } else { chunk };
+        let one_batch = cloud && m <= stats_rows;
+        let sampled;
+        let params = if cloud && !one_batch {
+            let pick: Vec<usize> = (0..stats_rows).map(|i| i * m / stats_rows).collect();
+            let rows: Vec<f32> =
+                pick.iter().flat_map(|&i| face_features[i * fin..(i + 1) * fin].iter().copied()).collect();
+            let corners: Option<Vec<[u32; 4]>> = points.map(|(_, c)| pick.iter().map(|&i| c[i]).collect());
+            let mut g = Graph::eval_shared(&self.params).with_batch_stats(true).capturing_stats();
+            self.logits(&mut g, rows, points.map(|p| p.0).zip(corners.as_deref()))?;
+            let mut store = self.params.clone();
+            for st in g.captured_stats() {
+                store.get_mut(st.running_mean).data_mut().copy_from_slice(&st.mean);
+                store.get_mut(st.running_var).data_mut().copy_from_slice(&st.var);
+            }
+            sampled = store;
+            &sampled
+        } else {
+            &self.params
+        };
+        let chunk = if one_batch { m } else { chunk }.max(1);
         let mut out = Vec::with_capacity(m);
-        for rows in face_features.chunks(chunk.max(1) * fin) {
-            let mut g = Graph::eval_shared(&self.params).with_batch_stats(cloud);
-            let x = g.input(Tensor::new(&[rows.len() / fin, fin], self.framed(rows.to_vec()))?);
-            let logits = self.net.forward(&mut g, x, None)?;
+        for (c, rows) in face_features.chunks(chunk.saturating_mul(fin)).enumerate() {
+            let lo = c * chunk;
+            let corners = points.map(|(proj, cs)| (proj, &cs[lo..lo + rows.len() / fin]));
+            let mut g = Graph::eval_shared(params).with_batch_stats(one_batch);
+            let logits = self.logits(&mut g, rows.to_vec(), corners)?;
             out.extend(probabilities(g.value(logits).data()));
         }
         Ok(out)
+    }
+
+    /// The logits of `rows` (cloud-frame F_info rows, framed here) in `g`; with
+    /// `points`, as [`Model::score_rows`].
+    fn logits(&self, g: &mut Graph, rows: Vec<f32>, points: Option<(&[f32], &[[u32; 4]])>) -> Result<Var> {
+        let fin = self.net.config.face_in();
+        let x = g.input(Tensor::new(&[rows.len() / fin, fin], self.framed(rows))?);
+        match points {
+            None => self.net.forward(g, x, None),
+            Some((proj, corners)) => self.net.forward_points_eval(g, x, proj, corners),
+        }
     }
 
     /// Probability that each candidate is a real face, in inference mode, for any
@@ -737,6 +787,17 @@ impl Model {
         corners: &[[u32; 4]],
         face_features: &[f32],
     ) -> Result<Vec<f32>> {
+        self.predict_base_with(points, corners, face_features, CLOUD_STATS_ROWS)
+    }
+
+    /// [`Model::predict_base`] with `stats_rows` for [`Model::score_rows`].
+    fn predict_base_with(
+        &self,
+        points: &[[f32; 3]],
+        corners: &[[u32; 4]],
+        face_features: &[f32],
+        stats_rows: usize,
+    ) -> Result<Vec<f32>> {
         let m = self.rows(face_features)?;
         if m != corners.len() {
             return Err(Error::Shape {
@@ -745,18 +806,20 @@ impl Model {
             });
         }
         let Some(kp) = &self.net.point else {
-            return self.classify(face_features);
+            return self.score_rows(face_features, None, CLASSIFY_CHUNK_ROWS, stats_rows);
         };
         check_corners(corners, points.len())?;
         if m == 0 {
             return Ok(Vec::new());
         }
         let pyr = prepare(points, kp.config())?;
-        let mut g = Graph::eval_shared(&self.params).with_batch_stats(self.net.config.cloud_batch_stats);
-        let pf = kp.forward(&mut g, &pyr)?;
-        let x = g.input(Tensor::new(&[m, self.net.config.face_in()], self.framed(face_features.to_vec()))?);
-        let logits = self.net.forward_points_eval(&mut g, x, pf, corners)?;
-        Ok(probabilities(g.value(logits).data()))
+        let proj = {
+            let mut g = Graph::eval_shared(&self.params).with_batch_stats(self.net.config.cloud_batch_stats);
+            let pf = kp.forward(&mut g, &pyr)?;
+            let proj = self.net.point_projection(&mut g, pf)?;
+            g.value(proj).data().to_vec()
+        };
+        self.score_rows(face_features, Some((&proj, corners)), CLASSIFY_CHUNK_ROWS, stats_rows)
     }
 
     /// The input rows as the network reads them: with [`ModelConfig::local_frame`], each
@@ -884,6 +947,11 @@ impl Model {
 /// of the GEMM's row block, so chunking changes no bit of the result.
 const CLASSIFY_CHUNK_ROWS: usize = 64 * crate::tensor::gemm::ROW_BLOCK;
 
+/// Candidates up to which a [`ModelConfig::cloud_batch_stats`] model scores a cloud in
+/// one batch; beyond, its statistics come from this many of them ([`Model::score_rows`]).
+/// 131,072 candidates: a cloud of about 12,000 points.
+const CLOUD_STATS_ROWS: usize = 1 << 17;
+
 /// `InvalidInput` naming the first candidate with a corner index `>= n_points`.
 pub(crate) fn check_corners(corners: &[[u32; 4]], n_points: usize) -> Result<()> {
     if let Some((c, q)) = corners.iter().enumerate().find(|(_, q)| q.iter().any(|&v| v as usize >= n_points))
@@ -964,31 +1032,21 @@ impl Network {
         Ok(h)
     }
 
-    /// Inference form of [`Network::forward`] for a point-encoder model, equal to it up
-    /// to float rounding (tested). The classifier's first layer reads
-    /// `[z(c0) ; z(c1) ; z(c2) ; z(c3) ; face code]` with weight blocks `[W0 … W3 Wf]`:
-    /// its pre-activation is `Σ_i (Z·W_iᵀ)[c_i] + code·Wfᵀ`, so each point's features
-    /// go through the corner blocks once per point (N rows) instead of once per
-    /// candidate corner (4·M rows, M ≈ 10 N), and no `M × 4·d_P` gather is built.
-    /// Nothing is recorded for a backward pass: training uses `forward`.
-    fn forward_points_eval(
-        &self,
-        g: &mut Graph,
-        face_features: Var,
-        pf: Var,
-        corners: &[[u32; 4]],
-    ) -> Result<Var> {
+    /// The per-point features through the corner blocks of the classifier's first
+    /// layer: row p holds W_i · pf_p for the corner slots i = 0..4 (4 · cout values),
+    /// so a candidate's pre-activation is its face code's part plus four looked-up
+    /// rows instead of a gathered 4 · d_P-wide input. Without hidden classifier
+    /// layers, `pf` itself.
+    fn point_projection(&self, g: &mut Graph, pf: Var) -> Result<Var> {
         let Some(first) = self.classifier.first() else {
-            return self.forward(g, face_features, Some((pf, corner_indices(corners))));
+            return Ok(pf);
         };
-        let h = self.face_code(g, face_features)?;
-        let (m, wf) = (g.value(h).rows(), g.value(h).cols());
         let dp = self.config.point_dim;
         let (cout, cin) = (first.cout, first.cin);
-        if m != corners.len() || cin != 4 * dp + wf || g.value(pf).cols() != dp {
+        if g.value(pf).cols() != dp || cin < 4 * dp {
             return Err(Error::Shape {
                 op: "model",
-                msg: format!("{m} candidates, {} corners, layer input {cin} ≠ 4·{dp} + {wf}", corners.len()),
+                msg: format!("point features {} for layer input {cin} and d_P {dp}", g.value(pf).shape()),
             });
         }
         let wv = g.param(first.weight);
@@ -1000,19 +1058,52 @@ impl Network {
                 w_pts.extend_from_slice(&w[o * cin + i * dp..o * cin + (i + 1) * dp]);
             }
         }
+        let w_pts = g.input(Tensor::new(&[4 * cout, dp], w_pts)?);
+        g.matmul_t(pf, w_pts)
+    }
+
+    /// Inference form of [`Network::forward`] for a point-encoder model, equal to it up
+    /// to float rounding (tested). The classifier's first layer reads
+    /// `[z(c0) ; z(c1) ; z(c2) ; z(c3) ; face code]` with weight blocks `[W0 … W3 Wf]`:
+    /// its pre-activation is `Σ_i (Z·W_iᵀ)[c_i] + code·Wfᵀ`, so each point's features
+    /// go through the corner blocks once per point (N rows, `proj` from
+    /// [`Network::point_projection`]) instead of once per candidate corner (4·M rows,
+    /// M ≈ 10 N), and no `M × 4·d_P` gather is built. Nothing is recorded for a
+    /// backward pass: training uses `forward`.
+    fn forward_points_eval(
+        &self,
+        g: &mut Graph,
+        face_features: Var,
+        proj: &[f32],
+        corners: &[[u32; 4]],
+    ) -> Result<Var> {
+        let dp = self.config.point_dim;
+        let Some(first) = self.classifier.first() else {
+            let pf = g.input(Tensor::new(&[proj.len() / dp.max(1), dp], proj.to_vec())?);
+            return self.forward(g, face_features, Some((pf, corner_indices(corners))));
+        };
+        let h = self.face_code(g, face_features)?;
+        let (m, wf) = (g.value(h).rows(), g.value(h).cols());
+        let (cout, cin) = (first.cout, first.cin);
+        if m != corners.len() || cin != 4 * dp + wf || proj.len() % (4 * cout) != 0 {
+            return Err(Error::Shape {
+                op: "model",
+                msg: format!("{m} candidates, {} corners, layer input {cin} ≠ 4·{dp} + {wf}", corners.len()),
+            });
+        }
+        let wv = g.param(first.weight);
+        let w = g.value(wv).data();
         let mut w_face = Vec::with_capacity(cout * wf);
         for o in 0..cout {
             w_face.extend_from_slice(&w[o * cin + 4 * dp..(o + 1) * cin]);
         }
-        let w_pts = g.input(Tensor::new(&[4 * cout, dp], w_pts)?);
         let w_face = g.input(Tensor::new(&[cout, wf], w_face)?);
-        let proj = g.matmul_t(pf, w_pts)?;
         let code = g.matmul_t(h, w_face)?;
         g.free(h);
         let mut pre = g.value(code).data().to_vec();
         g.free(code);
         {
-            let p = g.value(proj).data();
+            let p = proj;
             const ROWS: usize = 256;
             crate::par::for_each_chunk_mut(&mut pre, ROWS * cout, |ch, block| {
                 for (r, row) in block.chunks_exact_mut(cout).enumerate() {
@@ -1026,7 +1117,6 @@ impl Network {
                 }
             });
         }
-        g.free(proj);
         let x = g.input(Tensor::new(&[m, cout], pre)?);
         let (gamma, beta) = (g.param(first.bn.weight), g.param(first.bn.bias));
         let mut h = g.conv_bn_act(x, None, gamma, beta, first.bn.refs(), first.act)?;
@@ -1215,6 +1305,58 @@ mod tests {
         let other = model.classify_in_chunks(&x, usize::MAX / fin).unwrap();
         let diff = other.iter().zip(&whole).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
         assert!(diff > 1e-3, "the check could not fail: {diff}");
+    }
+
+    /// Beyond `stats_rows` candidates a `cloud_batch_stats` model takes its statistics
+    /// from the spread sample (rows ⌊i·m/N⌋) and scores every row with them, in any
+    /// chunks: the sampled rows get exactly what scoring the sample alone as one batch
+    /// gives, any other row what the same features get there (a row copied from a
+    /// sampled one scores as it), and the whole differs from one batch of every row.
+    /// For the face-only and the point-encoder paths.
+    #[test]
+    fn large_clouds_take_their_statistics_from_a_spread_sample() {
+        let close = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+        for kp in [false, true] {
+            let mut rng = Rng::new(21);
+            let base = if kp { ModelConfig::default_kp() } else { ModelConfig::default_preset() };
+            let model = Model::new(ModelConfig { cloud_batch_stats: true, ..base }, 3).unwrap();
+            let fin = model.config().face_in();
+            let (m, n_stats, n) = (1000usize, 64usize, 200usize);
+            let pts: Vec<[f32; 3]> = (0..n).map(|_| [0; 3].map(|_| rng.f32() * 2.0 - 1.0)).collect();
+            let mut corners: Vec<[u32; 4]> = (0..m).map(|_| [0; 4].map(|_| rng.below(n) as u32)).collect();
+            let mut x: Vec<f32> = (0..m * fin).map(|_| rng.f32() * 2.0 - 1.0).collect();
+            let pick: Vec<usize> = (0..n_stats).map(|i| i * m / n_stats).collect();
+            // Rows 1, 2, 3 (not sampled) copy sampled rows 0, 15 and 31.
+            for (r, p) in [(1usize, 0usize), (2, 15 * m / n_stats), (3, 31 * m / n_stats)] {
+                assert!(!pick.contains(&r) && pick.contains(&p));
+                let row = x[p * fin..(p + 1) * fin].to_vec();
+                x[r * fin..(r + 1) * fin].copy_from_slice(&row);
+                corners[r] = corners[p];
+            }
+            let score = |x: &[f32], c: &[[u32; 4]], stats: usize| {
+                if kp {
+                    model.predict_base_with(&pts, c, x, stats).unwrap()
+                } else {
+                    model.score_rows(x, None, 100, stats).unwrap()
+                }
+            };
+            let got = score(&x, &corners, n_stats);
+            assert_eq!(got.len(), m);
+            let xs: Vec<f32> = pick.iter().flat_map(|&i| x[i * fin..(i + 1) * fin].to_vec()).collect();
+            let cs: Vec<[u32; 4]> = pick.iter().map(|&i| corners[i]).collect();
+            let alone = score(&xs, &cs, n_stats);
+            let at_pick: Vec<f32> = pick.iter().map(|&i| got[i]).collect();
+            assert!(close(&at_pick, &alone) <= 1e-5, "kp {kp}: {}", close(&at_pick, &alone));
+            for (r, p) in [(1usize, 0usize), (2, 15 * m / n_stats), (3, 31 * m / n_stats)] {
+                assert!((got[r] - got[p]).abs() <= 1e-5, "kp {kp}: row {r} {} row {p} {}", got[r], got[p]);
+            }
+            if !kp {
+                // Chunks do not matter.
+                assert!(close(&model.score_rows(&x, None, 7, n_stats).unwrap(), &got) <= 1e-6);
+            }
+            let whole = score(&x, &corners, m);
+            assert!(close(&whole, &got) > 1e-4, "kp {kp}: the check could not fail");
+        }
     }
 
     /// The shipped weights (the `default` preset reading normals without their signs,

@@ -42,5 +42,5 @@ pub use gradcheck::{gradcheck, GradCheckConfig, GradCheckReport};
 pub use op::{Act, CustomOp, Op};
 pub use params::{Grads, ParamId, ParamKind, ParamStore};
 pub use shape::Shape;
-pub use tape::{BnRefs, Graph, Var};
+pub use tape::{BnRefs, BnStats, Graph, Var};
 pub use tensor::Tensor;

@@ -86,7 +86,25 @@ pub struct Graph<'p> {
     /// Outside train mode: batch norm reads the batch's own statistics (≥ 2 rows)
     /// instead of the running ones, and updates nothing ([`Graph::with_batch_stats`]).
     batch_stats: bool,
+    /// `Some` when asked ([`Graph::capturing_stats`]): the statistics each batch-norm
+    /// block normalised with, in execution order.
+    captured: Option<Vec<BnStats>>,
     spent: bool,
+}
+
+/// The statistics one batch-norm block normalised a batch with: the mean and the biased
+/// variance of its input columns, with the ids of the block's running buffers (what
+/// reads the same statistics back as running ones). See [`Graph::capturing_stats`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct BnStats {
+    /// The block's `running_mean` buffer.
+    pub running_mean: ParamId,
+    /// The block's `running_var` buffer.
+    pub running_var: ParamId,
+    /// Column means of the batch.
+    pub mean: Vec<f32>,
+    /// Column variances of the batch (biased: divided by the row count).
+    pub var: Vec<f32>,
 }
 
 fn shape_err(op: &'static str, msg: String) -> Error {
@@ -183,6 +201,7 @@ impl<'p> Graph<'p> {
             record,
             train,
             batch_stats: false,
+            captured: None,
             spent: false,
         }
     }
@@ -206,6 +225,7 @@ impl<'p> Graph<'p> {
             record: false,
             train: false,
             batch_stats: false,
+            captured: None,
             spent: false,
         }
     }
@@ -220,6 +240,22 @@ impl<'p> Graph<'p> {
     pub fn with_batch_stats(mut self, on: bool) -> Graph<'p> {
         self.batch_stats = on;
         self
+    }
+
+    /// Keeps the statistics of every batch-norm block that normalises with batch
+    /// statistics (train mode, or [`Graph::with_batch_stats`] with ≥ 2 rows), in
+    /// execution order ([`Graph::captured_stats`]). Writing them into a copy of the
+    /// running buffers makes an ordinary inference graph normalise any rows as this
+    /// batch was: how a large cloud is scored in chunks with statistics taken from a
+    /// sample of its candidates.
+    pub fn capturing_stats(mut self) -> Graph<'p> {
+        self.captured = Some(Vec::new());
+        self
+    }
+
+    /// The statistics kept since [`Graph::capturing_stats`] (empty without it).
+    pub fn captured_stats(&self) -> &[BnStats] {
+        self.captured.as_deref().unwrap_or(&[])
     }
 
     /// True when ops are recorded for `backward`.
@@ -794,7 +830,16 @@ impl<'p> Graph<'p> {
             }
             let eps = bn.eps as f64;
             let invstd = var.iter().map(|&v| (1.0 / (v + eps).sqrt()) as f32).collect::<Vec<f32>>();
-            (Some(z), mean.iter().map(|&v| v as f32).collect::<Vec<f32>>(), invstd)
+            let mean = mean.iter().map(|&v| v as f32).collect::<Vec<f32>>();
+            if let Some(kept) = &mut self.captured {
+                kept.push(BnStats {
+                    running_mean: bn.running_mean,
+                    running_var: bn.running_var,
+                    mean: mean.clone(),
+                    var: var.iter().map(|&v| v as f32).collect(),
+                });
+            }
+            (Some(z), mean, invstd)
         } else {
             let rm = self.params.get(bn.running_mean).data().to_vec();
             let rv = self.params.get(bn.running_var).data();

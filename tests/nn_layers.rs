@@ -70,6 +70,22 @@ fn off_kinks_at(s: &mut ParamStore, blk: &ConvBnAct, xt: &Tensor, train: bool) -
     far && (!train || var_ok)
 }
 
+/// A batch-norm block with random affine weights and running statistics, and a random
+/// `[m × c]` input: (store, block, [gamma, beta, running mean, running var], input, rng).
+fn random_bn(m: usize, c: usize, seed: u64) -> (ParamStore, BatchNorm1d, [Tensor; 4], Tensor, Rng) {
+    let mut rng = Rng::new(seed);
+    let mut s = ParamStore::new();
+    let bn = BatchNorm1d::new(&mut s, "bn", c, BatchNormConfig::default()).unwrap();
+    let (gm, bt) = (uniform(&[c], 0.5, 1.5, &mut rng), uniform(&[c], -1.0, 1.0, &mut rng));
+    let (rmv, rvv) = (uniform(&[c], -1.0, 1.0, &mut rng), uniform(&[c], 0.2, 2.0, &mut rng));
+    *s.get_mut(bn.weight) = gm.clone();
+    *s.get_mut(bn.bias) = bt.clone();
+    *s.get_mut(bn.running_mean) = rmv.clone();
+    *s.get_mut(bn.running_var) = rvv.clone();
+    let x = uniform(&[m, c], -2.0, 2.0, &mut rng);
+    (s, bn, [gm, bt, rmv, rvv], x, rng)
+}
+
 proptest! {
     #![proptest_config(cfg())]
 
@@ -169,16 +185,7 @@ proptest! {
 
     #[test]
     fn batch_norm_eval_uses_running_stats(m in 1usize..10, c in 1usize..6, seed in 0u64..1000) {
-        let mut rng = Rng::new(seed);
-        let mut s = ParamStore::new();
-        let bn = BatchNorm1d::new(&mut s, "bn", c, BatchNormConfig::default()).unwrap();
-        let (gm, bt) = (uniform(&[c], 0.5, 1.5, &mut rng), uniform(&[c], -1.0, 1.0, &mut rng));
-        let (rmv, rvv) = (uniform(&[c], -1.0, 1.0, &mut rng), uniform(&[c], 0.2, 2.0, &mut rng));
-        *s.get_mut(bn.weight) = gm.clone();
-        *s.get_mut(bn.bias) = bt.clone();
-        *s.get_mut(bn.running_mean) = rmv.clone();
-        *s.get_mut(bn.running_var) = rvv.clone();
-        let x = uniform(&[m, c], -2.0, 2.0, &mut rng);
+        let (mut s, bn, [gm, bt, rmv, rvv], x, _) = random_bn(m, c, seed);
         let mut g = Graph::eval(&mut s);
         let xv = g.input(x.clone());
         let y = bn.forward(&mut g, xv).unwrap();
@@ -198,16 +205,7 @@ proptest! {
     /// outputs and gradients equal a train graph's (the same statistics, the same rule).
     #[test]
     fn batch_norm_eval_with_batch_stats(m in 1usize..10, c in 1usize..6, seed in 0u64..1000) {
-        let mut rng = Rng::new(seed);
-        let mut s = ParamStore::new();
-        let bn = BatchNorm1d::new(&mut s, "bn", c, BatchNormConfig::default()).unwrap();
-        let (gm, bt) = (uniform(&[c], 0.5, 1.5, &mut rng), uniform(&[c], -1.0, 1.0, &mut rng));
-        let (rmv, rvv) = (uniform(&[c], -1.0, 1.0, &mut rng), uniform(&[c], 0.2, 2.0, &mut rng));
-        *s.get_mut(bn.weight) = gm.clone();
-        *s.get_mut(bn.bias) = bt.clone();
-        *s.get_mut(bn.running_mean) = rmv.clone();
-        *s.get_mut(bn.running_var) = rvv.clone();
-        let x = uniform(&[m, c], -2.0, 2.0, &mut rng);
+        let (mut s, bn, [gm, bt, rmv, rvv], x, mut rng) = random_bn(m, c, seed);
         let xd = x.data();
         let got = {
             let mut g = Graph::eval(&mut s).with_batch_stats(true);

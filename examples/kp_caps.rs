@@ -1,6 +1,7 @@
 //! Development look (session 28): the `default_kp` point encoder's neighbourhood caps per
 //! level for clouds given on the command line, in the frame `reconstruct` uses.
 //!   cargo run --release --example kp_caps -- CLOUD...
+//! `KPIC=F` sets the encoder's `input_cell` (level 0 grid-subsampled at F first cells).
 use point2quad::io::points::read_points;
 use point2quad::nn::kpfcnn::prepare;
 use point2quad::pipeline::frame::Frame;
@@ -8,7 +9,8 @@ use point2quad::pipeline::model::ModelConfig;
 use std::path::Path;
 
 fn main() {
-    let kp = ModelConfig::default_kp().point_encoder.unwrap();
+    let mut kp = ModelConfig::default_kp().point_encoder.unwrap();
+    kp.input_cell = std::env::var("KPIC").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0);
     for a in std::env::args().skip(1) {
         let pts = read_points(Path::new(&a)).unwrap();
         let f = Frame::fit(&pts).unwrap();

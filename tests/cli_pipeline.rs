@@ -979,7 +979,7 @@ fn a_csv_cloud_with_a_header_reads_like_its_xyz() {
 
 /// `train --kp-spacing-cells F` sets the point encoder's spacing scale in the saved
 /// config (and reconstruct runs with it); it is refused without a point encoder, for a
-/// non-positive value and with --resume.
+/// non-positive value and with --resume. `--kp-input-cell F` likewise.
 #[test]
 fn train_kp_spacing_cells_reaches_the_model_and_is_checked() {
     let s = Scratch::new("kpspacing");
@@ -1009,6 +1009,23 @@ fn train_kp_spacing_cells_reaches_the_model_and_is_checked() {
     ok(&["synth", "--from", &s.p("meshes/b_torus.obj"), "-o", &cloud, "--seed", "2"]);
     ok(&["reconstruct", &cloud, "-o", &out, "--model", &model, "--threshold", "0.3"]);
     assert!(Path::new(&out).is_file());
+    // `--kp-input-cell` the same way (level 0 on voxels).
+    let e = fails(&argv(&with(&["--kp-input-cell", "0.5"])), 2);
+    assert!(e.contains("no point encoder"), "{e}");
+    for bad in ["0", "-2", "nan"] {
+        let e = fails(&argv(&with(&["--config", "default_kp", "--kp-input-cell", bad])), 2);
+        assert!(e.contains("--kp-input-cell"), "{e}");
+    }
+    let e = fails(&argv(&with(&["--resume", &ckpt, "--kp-input-cell", "0.5"])), 2);
+    assert!(e.contains("--kp-input-cell cannot be combined"), "{e}");
+    let voxels = s.p("kp_voxels.p2qm");
+    let base = ["train", "--data", &data, "--out", &voxels, "--epochs", "1", "--max-candidates", "200"];
+    ok(&base.iter().copied().chain(["--config", "default_kp", "--kp-input-cell", "0.5"]).collect::<Vec<_>>());
+    let m = point2quad::pipeline::model::Model::load(Path::new(&voxels)).unwrap();
+    assert_eq!(m.config().point_encoder.as_ref().map(|k| k.input_cell), Some(0.5));
+    let out2 = s.p("c2.obj");
+    ok(&["reconstruct", &cloud, "-o", &out2, "--model", &voxels, "--threshold", "0.3"]);
+    assert!(Path::new(&out2).is_file());
 }
 
 fn argv(v: &[String]) -> Vec<&str> {

@@ -17,7 +17,7 @@ fn run(cfg: &KpfcnnConfig, params: &mut ParamStore, net: &Kpfcnn, pyr: &PointPyr
     let mut g = Graph::new(params, train, train);
     let out = net.forward(&mut g, pyr).unwrap();
     let t = g.value(out).clone();
-    assert_eq!(t.dims(), &[pyr.points[0].len(), cfg.out_dim]);
+    assert_eq!(t.dims(), &[pyr.num_inputs(), cfg.out_dim]);
     assert!(t.all_finite());
     t
 }
@@ -337,6 +337,102 @@ fn spacing_cells_make_the_pyramid_independent_of_the_cloud_scale() {
     let plain = kpc::tiny_config();
     let (a, b) = (prepare(&pts, &plain).unwrap(), prepare(&scaled(8.0), &plain).unwrap());
     assert_ne!(a.points[1].len(), b.points[1].len(), "the plain pyramid should depend on scale");
+}
+
+/// With `input_cell`, level 0 is the cloud grid-subsampled: one barycentre per voxel of
+/// `input_cell × first_cell` (brute force here), and each input point reads its voxel's
+/// row. A cloud with every point twice gives each copy the row the cloud alone gives
+/// that point, bit for bit (the same voxels and barycentres), in eval and train mode;
+/// the features differ from those with the raw cloud as level 0 (the check can fail).
+#[test]
+fn input_cell_reads_each_points_voxel() {
+    use point2quad::spatial::subsample::voxel_key;
+    let cfg = KpfcnnConfig { input_cell: 0.5, ..kpc::tiny_config() };
+    let cell = 0.5 * cfg.first_cell;
+    // Points close enough together that voxels hold several.
+    let pts = kpc::sphere_cloud(1500, 0.6, [0.1, -0.2, 0.05], 4);
+    let pyr = prepare(&pts, &cfg).unwrap();
+    let voxel = pyr.input_voxel.clone().expect("input_cell sets the voxel table");
+    assert_eq!((voxel.len(), pyr.num_inputs()), (pts.len(), pts.len()));
+    let mut groups: std::collections::HashMap<[i64; 3], Vec<usize>> = Default::default();
+    for (i, &p) in pts.iter().enumerate() {
+        groups.entry(voxel_key(p, cell)).or_default().push(i);
+    }
+    assert_eq!(pyr.points[0].len(), groups.len());
+    assert!(groups.len() < pts.len() * 9 / 10, "too few shared voxels to test: {}", groups.len());
+    for members in groups.values() {
+        let mut c = [0.0f64; 3];
+        for &i in members {
+            (0..3).for_each(|d| c[d] += pts[i][d] as f64);
+        }
+        let want = c.map(|x| (x / members.len() as f64) as f32);
+        for &i in members {
+            assert_eq!(pyr.points[0][voxel[i] as usize], want, "point {i}");
+        }
+    }
+    // Levels above 0 are the plain pyramid of level 0.
+    let plain = prepare(&pyr.points[0], &kpc::tiny_config()).unwrap();
+    assert_eq!(plain.points, pyr.points);
+    let twice: Vec<[f32; 3]> = pts.iter().chain(&pts).copied().collect();
+    let mut ps = ParamStore::new();
+    let net = Kpfcnn::new(&cfg, &mut ps).unwrap();
+    for train in [false, true] {
+        let once = run(&cfg, &mut ps, &net, &pyr, train);
+        let both = run(&cfg, &mut ps, &net, &prepare(&twice, &cfg).unwrap(), train);
+        for i in 0..pts.len() {
+            assert_eq!(both.row(i), once.row(i), "train {train}, point {i}");
+            assert_eq!(both.row(i + pts.len()), once.row(i), "train {train}, copy of point {i}");
+        }
+        let raw =
+            run(&kpc::tiny_config(), &mut ps, &net, &prepare(&pts, &kpc::tiny_config()).unwrap(), train);
+        assert!(raw.data().iter().zip(once.data()).any(|(a, b)| (a - b).abs() > 1e-3));
+    }
+}
+
+/// What `input_cell` is for: on a dense patch, level 0's neighbourhoods hold at most the
+/// voxels within the convolution radius ((2 · 2.5 / 0.5 + 1)² = 121 for a flat patch),
+/// where the raw cloud's grow with the density.
+#[test]
+fn input_cell_bounds_level_zero_neighbourhoods() {
+    let n = 60;
+    let pts: Vec<[f32; 3]> =
+        (0..n * n).map(|i| [(i % n) as f32 / n as f32, (i / n) as f32 / n as f32, 0.0]).collect();
+    let raw = prepare(&pts, &kpc::tiny_config()).unwrap();
+    let voxels = prepare(&pts, &KpfcnnConfig { input_cell: 0.5, ..kpc::tiny_config() }).unwrap();
+    assert!(raw.conv[0].cap > 400, "raw level-0 cap {}", raw.conv[0].cap);
+    assert!(voxels.conv[0].cap <= 121, "level-0 cap with input_cell {}", voxels.conv[0].cap);
+    assert!(voxels.pool[0].cap <= 121, "pooling cap with input_cell {}", voxels.pool[0].cap);
+}
+
+/// Gradients through the voxel read (a gather whose backward adds the rows of points
+/// sharing a voxel): the piecewise-linear check above on a cloud with every point twice.
+#[test]
+fn input_cell_kpfcnn_gradcheck_piecewise_linear() {
+    let cfg = KpfcnnConfig {
+        first_features_dim: 8,
+        out_dim: 3,
+        leaky_slope: 1.0,
+        input_cell: 0.5,
+        ..kpc::tiny_config()
+    };
+    let pts = kpc::sphere_cloud(90, 0.5, [0.0; 3], 1);
+    let twice: Vec<[f32; 3]> = pts.iter().chain(&pts).copied().collect();
+    let pyr = prepare(&twice, &cfg).unwrap();
+    assert_eq!((pyr.points[0].len(), pyr.num_inputs()), (90, 180));
+    let mut ps = ParamStore::new();
+    let net = Kpfcnn::new(&cfg, &mut ps).unwrap();
+    let gc =
+        GradCheckConfig { eps: 1e-4, max_per_param: 6, seed: 3, train: false, ..GradCheckConfig::default() };
+    let rep = gradcheck(&mut ps, |g| net.forward(g, &pyr), &gc).unwrap();
+    assert!(
+        rep.passed(&gc),
+        "worst {} skipped {} of {}: {:?}",
+        rep.worst_ratio,
+        rep.skipped,
+        rep.checked,
+        rep.failures
+    );
+    assert!(rep.checked > 300, "{}", rep.checked);
 }
 
 /// `median_spacing` equals a brute-force median of each point's nearest distinct

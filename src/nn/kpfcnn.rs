@@ -34,7 +34,7 @@ use crate::nn::module::Module;
 use crate::rng::Rng;
 use crate::spatial::kdtree::KdTree;
 use crate::spatial::neighborhoods::{nearest_upsampling, radius_neighborhoods, NeighborCap, Neighborhoods};
-use crate::spatial::subsample::subsample_pyramid;
+use crate::spatial::subsample::{grid_subsample, subsample_pyramid};
 use crate::tensor::{Act, Graph, ParamId, ParamKind, ParamStore, Tensor, Var};
 use crate::{Error, Result};
 
@@ -104,6 +104,13 @@ pub struct KpfcnnConfig {
     /// that grow with the number of neighbours, and batch norm's running statistics mix
     /// clouds of very different density). 0 keeps the cloud as given (the presets).
     pub spacing_cells: f32,
+    /// When > 0, level 0 is not the raw cloud but the cloud grid-subsampled with cell
+    /// `input_cell · first_cell` (one barycentre per voxel), and each input point reads
+    /// the output features of its voxel: level 0's neighbourhoods then hold a bounded
+    /// number of points (about π (conv_radius / input_cell)² on a surface) however
+    /// dense the cloud. 0 keeps the raw cloud as level 0 (DESIGN §3; the presets), whose
+    /// cost grows with density.
+    pub input_cell: f32,
 }
 
 impl Default for KpfcnnConfig {
@@ -131,6 +138,7 @@ impl KpfcnnConfig {
             out_dim: 64,
             seed: 0,
             spacing_cells: 0.0,
+            input_cell: 0.0,
         }
     }
 
@@ -197,6 +205,9 @@ impl KpfcnnConfig {
         }
         if !(self.spacing_cells.is_finite() && self.spacing_cells >= 0.0) {
             return bad(format!("spacing_cells must be finite and ≥ 0, got {}", self.spacing_cells));
+        }
+        if !(self.input_cell.is_finite() && self.input_cell >= 0.0) {
+            return bad(format!("input_cell must be finite and ≥ 0, got {}", self.input_cell));
         }
         if !(self.bn_momentum.is_finite() && (0.0..=1.0).contains(&self.bn_momentum)) {
             return bad(format!("bn_momentum must be in [0, 1], got {}", self.bn_momentum));
@@ -342,6 +353,10 @@ pub struct PointPyramid {
     pub pool: Vec<Neighborhoods>,
     /// For each level-l point, its nearest level-(l + 1) point (for nearest upsampling).
     pub upsample: Vec<Arc<[u32]>>,
+    /// With [`KpfcnnConfig::input_cell`]: for each input point, its level-0 point (the
+    /// barycentre of its voxel), whose features it reads; `None` when level 0 is the
+    /// input cloud.
+    pub input_voxel: Option<Arc<[u32]>>,
 }
 
 /// Builds the pyramid of `points` for `cfg`: grid subsampling, radius neighbourhoods capped per
@@ -368,6 +383,16 @@ pub fn prepare(points: &[[f32; 3]], cfg: &KpfcnnConfig) -> Result<PointPyramid> 
         }
         None => points,
     };
+    let mut input_voxel = None;
+    let voxels;
+    let points = if cfg.input_cell > 0.0 {
+        let v = grid_subsample(points, None, cfg.input_cell * cfg.first_cell)?;
+        input_voxel = Some(Arc::from(v.cluster));
+        voxels = v.points;
+        &voxels[..]
+    } else {
+        points
+    };
     let sub = subsample_pyramid(points, cfg.first_cell, n_levels)?;
     let trees: Vec<KdTree> = sub.levels.iter().map(|l| KdTree::build(l)).collect();
     let mut conv = Vec::with_capacity(n_levels);
@@ -381,7 +406,7 @@ pub fn prepare(points: &[[f32; 3]], cfg: &KpfcnnConfig) -> Result<PointPyramid> 
             upsample.push(nearest_upsampling(&trees[l + 1], &sub.levels[l])?.into());
         }
     }
-    Ok(PointPyramid { points: sub.levels, cells: sub.cells, conv, pool, upsample })
+    Ok(PointPyramid { points: sub.levels, cells: sub.cells, conv, pool, upsample, input_voxel })
 }
 
 /// The median, over the points that have one, of the distance to the nearest *other*
@@ -408,6 +433,12 @@ impl PointPyramid {
     /// Number of levels.
     pub fn num_levels(&self) -> usize {
         self.points.len()
+    }
+
+    /// Number of input points: the rows of the network's output (level 0's points, or,
+    /// with [`KpfcnnConfig::input_cell`], the points read from level 0's voxels).
+    pub fn num_inputs(&self) -> usize {
+        self.input_voxel.as_ref().map_or(self.points[0].len(), |v| v.len())
     }
 
     /// The input feature tensor `[N × C]` for `input`.
@@ -772,7 +803,15 @@ impl Kpfcnn {
         }
         let out = self.head.forward(g, x)?;
         g.free(x);
-        Ok(out)
+        match &pyr.input_voxel {
+            // Each input point reads its voxel's row.
+            Some(voxel) => {
+                let rows = g.gather_rows(out, voxel.clone(), false)?;
+                g.free(out);
+                Ok(rows)
+            }
+            None => Ok(out),
+        }
     }
 }
 

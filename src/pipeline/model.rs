@@ -320,6 +320,9 @@ impl ModelConfig {
             if k.spacing_cells > 0.0 {
                 t += &format!("kp_spacing_cells = {}\n", k.spacing_cells);
             }
+            if k.input_cell > 0.0 {
+                t += &format!("kp_input_cell = {}\n", k.input_cell);
+            }
         }
         t
     }
@@ -340,6 +343,7 @@ impl ModelConfig {
         let mut face_in = None;
         let mut seen: Vec<&str> = Vec::new();
         let mut kp_seen = 0usize;
+        let mut kp_optional = 0usize;
         let mut optional_seen = 0usize;
         for (i, line) in text.lines().enumerate() {
             let line = line.trim();
@@ -416,6 +420,7 @@ impl ModelConfig {
                         }
                         "kp_first_cell" => kp.first_cell = num(v)?,
                         "kp_spacing_cells" => kp.spacing_cells = num(v)?,
+                        "kp_input_cell" => kp.input_cell = num(v)?,
                         "kp_conv_radius" => kp.conv_radius = num(v)?,
                         "kp_kp_extent" => kp.kp_extent = num(v)?,
                         "kp_num_kernel_points" => kp.num_kernel_points = int(v)?,
@@ -434,13 +439,19 @@ impl ModelConfig {
                         "kp_seed" => kp.seed = v.parse().map_err(|_| bad("bad number"))?,
                         _ => return Err(bad("unknown key")),
                     }
-                    kp_seen += 1;
+                    // The optional ones (absent in files written before them) do not
+                    // stand in for a required one.
+                    if matches!(k, "kp_spacing_cells" | "kp_input_cell") {
+                        kp_optional += 1;
+                    } else {
+                        kp_seen += 1;
+                    }
                 }
                 _ => return Err(bad("unknown key")),
             }
             seen.push(k);
         }
-        if seen.len() - kp_seen - optional_seen < 7 {
+        if seen.len() - kp_seen - kp_optional - optional_seen < 7 {
             return Err(Error::parse(name, 0, "model config: missing keys"));
         }
         if c.point_dim > 0 {
@@ -453,7 +464,7 @@ impl ModelConfig {
             }
             kp.out_dim = c.point_dim;
             c.point_encoder = Some(kp);
-        } else if kp_seen > 0 {
+        } else if kp_seen + kp_optional > 0 {
             return Err(Error::parse(name, 0, "model config: kp_* keys with point_dim 0"));
         }
         c.validate().map_err(|e| Error::parse(name, 0, e.to_string()))?;
@@ -1155,6 +1166,7 @@ mod tests {
                 seed: u64::MAX,
                 out_dim: 5,
                 spacing_cells: 1.0 / 3.0,
+                input_cell: 0.1 + 0.7,
                 ..KpfcnnConfig::paper()
             }),
             point_dim: 5,
@@ -1225,6 +1237,17 @@ mod tests {
         for bad in ["-1", "inf", "x"] {
             assert!(ModelConfig::from_text(&format!("{kp}kp_spacing_cells = {bad}\n"), p).is_err(), "{bad}");
         }
+        // `kp_input_cell` likewise; neither optional key stands in for a required one.
+        assert!(!kp.contains("kp_input_cell"));
+        let voxel = ModelConfig::from_text(&format!("{kp}kp_input_cell = 0.25\n"), p).unwrap();
+        assert_eq!(voxel.point_encoder.as_ref().map(|k| k.input_cell), Some(0.25));
+        assert_eq!(ModelConfig::from_text(&voxel.to_text(), p).unwrap(), voxel);
+        for bad in ["-1", "inf", "x"] {
+            assert!(ModelConfig::from_text(&format!("{kp}kp_input_cell = {bad}\n"), p).is_err(), "{bad}");
+        }
+        let both = "kp_spacing_cells = 1\nkp_input_cell = 0.5\n";
+        assert!(ModelConfig::from_text(&format!("{}\n{both}", without("kp_seed")), p).is_err());
+        assert!(ModelConfig::from_text(&format!("{def}{both}"), p).is_err());
         for (from, to) in [
             ("simple,", "simplex,"),
             ("kp_input = ones", "kp_input = twos"),
@@ -1655,7 +1678,12 @@ mod tests {
         // logits must agree to float rounding. Non-trivial BN statistics and weights
         // (a few SGD-free random perturbations) so no block is zero.
         for seed in 0..3u64 {
-            let mut m = Model::new(ModelConfig::default_kp(), seed).unwrap();
+            // Seed 2: level 0 on voxels (`input_cell`), several points to a voxel here.
+            let mut cfg = ModelConfig::default_kp();
+            if seed == 2 {
+                cfg.point_encoder.as_mut().unwrap().input_cell = 10.0;
+            }
+            let mut m = Model::new(cfg, seed).unwrap();
             let mut rng = Rng::new(10 + seed);
             let n = 300;
             let pts: Vec<[f32; 3]> = (0..n)
@@ -1687,6 +1715,9 @@ mod tests {
                 let fast = m.predict_with_points(&pts, &corners, &feats).unwrap();
                 let kp = m.net.point_encoder().unwrap();
                 let pyr = prepare(&pts, kp.config()).unwrap();
+                if seed == 2 {
+                    assert!(pyr.points[0].len() < n / 2, "{} voxels", pyr.points[0].len());
+                }
                 let mut g = Graph::eval_shared(&m.params).with_batch_stats(cloud);
                 let pf = kp.forward(&mut g, &pyr).unwrap();
                 // The rows as training feeds them (in the candidate's frame for this preset).

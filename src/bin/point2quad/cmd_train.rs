@@ -46,6 +46,11 @@ OPTIONS:
                           so that its median nearest-neighbour distance is F cells
                           of the encoder's first level, so every cloud looks equally
                           dense to it (a fresh model only) [off]
+    --kp-input-cell F     with a point encoder: its level 0 is the cloud
+                          grid-subsampled with cell F × its first cell (each point
+                          reads its voxel's features) instead of every point, so its
+                          cost stops growing with the cloud's density (a fresh model
+                          only) [off]
     --epochs N            total epochs, 1..100000 (a resumed run continues up to N;
                           left out, up to the checkpoint's own) [40]
     --resume CKPT         continue exactly from a MODEL.ckpt written earlier: it
@@ -107,6 +112,7 @@ const SPEC: Spec = Spec {
         "--scale",
         "--jitter",
         "--kp-spacing-cells",
+        "--kp-input-cell",
         "--draws",
     ],
     switches: &["--no-rotate", "--no-augment", "--sign-free-normals"],
@@ -529,11 +535,12 @@ pub fn run(argv: &[String]) -> Result<()> {
     augmentation(&a, &mut cfg)?;
     // These options shape a fresh model's config; --init and --resume read theirs from a file.
     let from_file = a.value("--init").is_some() || a.value("--resume").is_some();
-    if a.value("--kp-spacing-cells").is_some() && from_file {
-        return Err(Error::Usage(
-            "train: --kp-spacing-cells cannot be combined with --init or --resume (the weights file holds its config)"
-                .into(),
-        ));
+    for opt in ["--kp-spacing-cells", "--kp-input-cell"] {
+        if a.value(opt).is_some() && from_file {
+            return Err(Error::Usage(format!(
+                "train: {opt} cannot be combined with --init or --resume (the weights file holds its config)"
+            )));
+        }
     }
     if a.switch("--sign-free-normals") && from_file {
         return Err(Error::Usage(
@@ -617,20 +624,25 @@ pub fn run(argv: &[String]) -> Result<()> {
             None => {
                 let mut config = ModelConfig::preset(a.value("--config").unwrap_or("default"))?;
                 config.sign_free_normals = a.switch("--sign-free-normals");
-                if let Some(v) = a.value("--kp-spacing-cells") {
-                    let f: f32 = a.parsed(cmd, "--kp-spacing-cells", 0.0f32)?;
+                for opt in ["--kp-spacing-cells", "--kp-input-cell"] {
+                    let Some(v) = a.value(opt) else { continue };
+                    let f: f32 = a.parsed(cmd, opt, 0.0f32)?;
                     let Some(kp) = config.point_encoder.as_mut() else {
                         return Err(Error::Usage(format!(
-                            "train: --kp-spacing-cells {v}: the {} preset has no point encoder (use default_kp or paper)",
+                            "train: {opt} {v}: the {} preset has no point encoder (use default_kp or paper)",
                             config.preset
                         )));
                     };
                     if !(f.is_finite() && f > 0.0) {
                         return Err(Error::Usage(format!(
-                            "train: --kp-spacing-cells must be a finite number > 0, got {v}"
+                            "train: {opt} must be a finite number > 0, got {v}"
                         )));
                     }
-                    kp.spacing_cells = f;
+                    if opt == "--kp-spacing-cells" {
+                        kp.spacing_cells = f;
+                    } else {
+                        kp.input_cell = f;
+                    }
                 }
                 (Model::new(config, cfg.seed)?, None)
             }

@@ -1012,7 +1012,7 @@ fn train_kp_spacing_cells_reaches_the_model_and_is_checked() {
     // `--kp-input-cell` the same way (level 0 on voxels).
     let e = fails(&argv(&with(&["--kp-input-cell", "0.5"])), 2);
     assert!(e.contains("no point encoder"), "{e}");
-    for bad in ["0", "-2", "nan"] {
+    for bad in ["0", "-2", "nan", "1.5"] {
         let e = fails(&argv(&with(&["--config", "default_kp", "--kp-input-cell", bad])), 2);
         assert!(e.contains("--kp-input-cell"), "{e}");
     }

@@ -16,8 +16,10 @@
 //!
 //! | preset | blocks | widths | levels (cells) | parameters |
 //! |---|---|---|---|---|
-//! | `default_preset()` | simple, resnetb, (strided, resnetb) ×2 | 32 → 128, d_P 64 | 3 (0.03 raw, 0.06, 0.12) | 65,744 |
-//! | `paper()` | S3DIS list, rigid | 128 → 2048, d_P 64 | 5 (0.03 raw, 0.06 … 0.48) | 24,364,224 |
+//! | `default_preset()` | simple, resnetb, (strided, resnetb) ×2 | 32 → 128, d_P 64 | 3 (0.03 raw†, 0.06, 0.12) | 65,744 |
+//! | `paper()` | S3DIS list, rigid | 128 → 2048, d_P 64 | 5 (0.03 raw†, 0.06 … 0.48) | 24,364,224 |
+//!
+//! † level 0 is the raw cloud unless [`KpfcnnConfig::input_cell`] puts it on voxels.
 //!
 //! `paper`: encoder 20,174,144 + decoder unaries 4,181,760 + head 8,320 = 24,364,224, the
 //! authors' KPFCNN for this block list with rigid KPConv (no bias; K × C_in × C_out weights),
@@ -78,7 +80,8 @@ pub struct KpfcnnConfig {
     pub first_features_dim: usize,
     /// Input features.
     pub input: InputFeatures,
-    /// Nominal cell of level 0 (the raw points); level l has `first_cell · 2^l`.
+    /// Nominal cell of level 0 (the raw points, or their voxels with `input_cell`);
+    /// level l has `first_cell · 2^l`.
     pub first_cell: f32,
     /// Neighbourhood (and kernel ball) radius, in cells of the level.
     pub conv_radius: f32,
@@ -109,7 +112,8 @@ pub struct KpfcnnConfig {
     /// the output features of its voxel: level 0's neighbourhoods then hold a bounded
     /// number of points (about π (conv_radius / input_cell)² on a surface) however
     /// dense the cloud. 0 keeps the raw cloud as level 0 (DESIGN §3; the presets), whose
-    /// cost grows with density.
+    /// cost grows with density. At most 1: level 0's voxels stay finer than level 1's
+    /// cells.
     pub input_cell: f32,
 }
 
@@ -206,8 +210,8 @@ impl KpfcnnConfig {
         if !(self.spacing_cells.is_finite() && self.spacing_cells >= 0.0) {
             return bad(format!("spacing_cells must be finite and ≥ 0, got {}", self.spacing_cells));
         }
-        if !(self.input_cell.is_finite() && self.input_cell >= 0.0) {
-            return bad(format!("input_cell must be finite and ≥ 0, got {}", self.input_cell));
+        if !(self.input_cell.is_finite() && (0.0..=1.0).contains(&self.input_cell)) {
+            return bad(format!("input_cell must be in [0, 1] (first cells), got {}", self.input_cell));
         }
         if !(self.bn_momentum.is_finite() && (0.0..=1.0).contains(&self.bn_momentum)) {
             return bad(format!("bn_momentum must be in [0, 1], got {}", self.bn_momentum));
@@ -342,7 +346,8 @@ impl Plan {
 /// Everything geometric the network needs for one cloud, computed once and reusable.
 #[derive(Clone, Debug)]
 pub struct PointPyramid {
-    /// Points per level; level 0 is the input cloud in input order (scaled when
+    /// Points per level; level 0 is the input cloud in input order, or its voxels'
+    /// barycentres with [`KpfcnnConfig::input_cell`] (either scaled when
     /// [`KpfcnnConfig::spacing_cells`] is set).
     pub points: Vec<Vec<[f32; 3]>>,
     /// Cell per level (level 0 nominal).
@@ -363,7 +368,9 @@ pub struct PointPyramid {
 /// `cfg.neighbor_cap`, pooling neighbourhoods and upsampling indices. With
 /// `cfg.spacing_cells > 0` the cloud is first scaled about the origin so that its median
 /// nearest-neighbour distance ([`median_spacing`]) is `spacing_cells · first_cell`; a cloud
-/// with no two distinct points is left as it is.
+/// with no two distinct points is left as it is. With `cfg.input_cell > 0` the (scaled)
+/// cloud is then grid-subsampled with cell `input_cell · first_cell` and the pyramid built
+/// on the voxels' barycentres ([`PointPyramid::input_voxel`] maps the points to them).
 ///
 /// # Errors
 /// `InvalidInput` for an empty cloud, a non-finite coordinate (named by index) or a bad config.

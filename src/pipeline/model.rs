@@ -80,8 +80,9 @@ pub struct ModelConfig {
     /// running averages from training ([`Graph::with_batch_stats`]). Training draws one
     /// cloud a step, so each step's statistics are one cloud's; running averages over
     /// many clouds fit none of them well, which the point encoder's features show most
-    /// (docs/EXPERIMENTS.md, sessions 27 and 28). The cost: a cloud's candidates are
-    /// scored in one batch, not in chunks. `cloud_batch_stats = true` in the text form,
+    /// (docs/EXPERIMENTS.md, sessions 27 and 28). Up to 131,072 candidates are scored in
+    /// one batch; larger clouds take the statistics of a spread sample of them
+    /// ([`Model::score_rows`]). `cloud_batch_stats = true` in the text form,
     /// written only when set (files without it read the running averages).
     pub cloud_batch_stats: bool,
 }
@@ -344,7 +345,6 @@ impl ModelConfig {
         let mut seen: Vec<&str> = Vec::new();
         let mut kp_seen = 0usize;
         let mut kp_optional = 0usize;
-        let mut optional_seen = 0usize;
         for (i, line) in text.lines().enumerate() {
             let line = line.trim();
             if line.is_empty() || line.starts_with('#') {
@@ -367,14 +367,8 @@ impl ModelConfig {
                 "preset" => c.preset = v.to_string(),
                 "use_context" => c.use_context = v.parse().map_err(|_| bad("bad bool"))?,
                 "local_frame" => c.local_frame = v.parse().map_err(|_| bad("bad bool"))?,
-                "sign_free_normals" => {
-                    c.sign_free_normals = v.parse().map_err(|_| bad("bad bool"))?;
-                    optional_seen += 1;
-                }
-                "cloud_batch_stats" => {
-                    c.cloud_batch_stats = v.parse().map_err(|_| bad("bad bool"))?;
-                    optional_seen += 1;
-                }
+                "sign_free_normals" => c.sign_free_normals = v.parse().map_err(|_| bad("bad bool"))?,
+                "cloud_batch_stats" => c.cloud_batch_stats = v.parse().map_err(|_| bad("bad bool"))?,
                 "face_in" => face_in = Some(int(v)?),
                 "face_widths" => {
                     let w = usize_list(v)?;
@@ -384,23 +378,15 @@ impl ModelConfig {
                 "classifier_widths" => c.classifier_widths = usize_list(v)?,
                 "leaky_slope" => c.leaky_slope = num(v)?,
                 "bn_momentum" => c.bn_momentum = num(v)?,
-                "refine_rounds" => {
-                    c.refine_rounds = int(v)?;
-                    optional_seen += 1;
-                }
-                "refine_widths" => {
-                    c.refine_widths = usize_list(v)?;
-                    optional_seen += 1;
-                }
+                "refine_rounds" => c.refine_rounds = int(v)?,
+                "refine_widths" => c.refine_widths = usize_list(v)?,
                 "refine_sides" => {
                     c.refine_sides = SideRule::from_name(v)
                         .ok_or_else(|| bad("refine_sides must be direction or normals"))?;
-                    optional_seen += 1;
                 }
                 "refine_input" => {
                     c.refine_input = RefineInput::from_name(v)
                         .ok_or_else(|| bad("refine_input must be base, flow or inside"))?;
-                    optional_seen += 1;
                 }
                 _ if k.starts_with("kp_") => {
                     match k {
@@ -451,8 +437,11 @@ impl ModelConfig {
             }
             seen.push(k);
         }
-        if seen.len() - kp_seen - kp_optional - optional_seen < 7 {
-            return Err(Error::parse(name, 0, "model config: missing keys"));
+        // Named, so that no optional key (`local_frame`, `face_in`, the refinement's)
+        // can stand in for a missing one.
+        let missing: Vec<&str> = REQUIRED_KEYS.iter().copied().filter(|k| !seen.contains(k)).collect();
+        if !missing.is_empty() {
+            return Err(Error::parse(name, 0, format!("model config: missing keys: {}", missing.join(", "))));
         }
         if c.point_dim > 0 {
             if kp_seen < KP_KEYS {
@@ -489,6 +478,10 @@ pub const MAX_REFINE_ROUNDS: usize = 8;
 
 /// Number of `kp_*` keys [`ModelConfig::to_text`] writes for a point encoder.
 const KP_KEYS: usize = 12;
+
+/// Keys every model config has (every file since the first).
+const REQUIRED_KEYS: [&str; 7] =
+    ["preset", "use_context", "face_widths", "point_dim", "classifier_widths", "leaky_slope", "bn_momentum"];
 
 fn block_name(b: BlockKind) -> &'static str {
     match b {
@@ -600,7 +593,8 @@ impl Model {
     }
 
     /// Probability that each candidate is a real face, in inference mode (running
-    /// batch-norm statistics, nothing recorded), for a model without point encoder.
+    /// batch-norm statistics, or the cloud's own with [`ModelConfig::cloud_batch_stats`];
+    /// nothing recorded), for a model without point encoder.
     ///
     /// # Errors
     /// `Error::Shape` when `face_features.len()` is not a multiple of the input width,
@@ -661,7 +655,9 @@ impl Model {
         let one_batch = cloud && m <= stats_rows;
         let sampled;
         let params = if cloud && !one_batch {
-            let pick: Vec<usize> = (0..stats_rows).map(|i| i * m / stats_rows).collect();
+            // In u64: i · m passes u32 on 32-bit targets (wasm32) for large clouds.
+            let pick: Vec<usize> =
+                (0..stats_rows).map(|i| (i as u64 * m as u64 / stats_rows as u64) as usize).collect();
             let rows: Vec<f32> =
                 pick.iter().flat_map(|&i| face_features[i * fin..(i + 1) * fin].iter().copied()).collect();
             let corners: Option<Vec<[u32; 4]>> = points.map(|(_, c)| pick.iter().map(|&i| c[i]).collect());
@@ -1221,6 +1217,17 @@ mod tests {
         );
         assert!(ModelConfig::from_text(&kp_text.replace("stats = true", "stats = 1"), p).is_err());
         assert!(ModelConfig::from_text(&format!("{kp_text}cloud_batch_stats = true\n"), p).is_err());
+        // Required keys are named when missing; optional ones do not stand in for them.
+        for key in REQUIRED_KEYS {
+            let short: String = def
+                .lines()
+                .filter(|l| !l.starts_with(&format!("{key} ")))
+                .map(|l| format!("{l}\n"))
+                .collect();
+            assert!(short.len() < def.len(), "{key}");
+            let e = ModelConfig::from_text(&format!("{short}sign_free_normals = true\n"), p).unwrap_err();
+            assert!(e.to_string().contains(&format!("missing keys: {key}")), "{e}");
+        }
         // Point-encoder keys: all needed with point_dim > 0, none allowed without, each
         // value checked.
         let kp = ModelConfig::default_kp().to_text();
@@ -1242,7 +1249,7 @@ mod tests {
         let voxel = ModelConfig::from_text(&format!("{kp}kp_input_cell = 0.25\n"), p).unwrap();
         assert_eq!(voxel.point_encoder.as_ref().map(|k| k.input_cell), Some(0.25));
         assert_eq!(ModelConfig::from_text(&voxel.to_text(), p).unwrap(), voxel);
-        for bad in ["-1", "inf", "x"] {
+        for bad in ["-1", "inf", "x", "1.5"] {
             assert!(ModelConfig::from_text(&format!("{kp}kp_input_cell = {bad}\n"), p).is_err(), "{bad}");
         }
         let both = "kp_spacing_cells = 1\nkp_input_cell = 0.5\n";
@@ -1373,10 +1380,17 @@ mod tests {
             for (r, p) in [(1usize, 0usize), (2, 15 * m / n_stats), (3, 31 * m / n_stats)] {
                 assert!((got[r] - got[p]).abs() <= 1e-5, "kp {kp}: row {r} {} row {p} {}", got[r], got[p]);
             }
-            if !kp {
-                // Chunks do not matter.
-                assert!(close(&model.score_rows(&x, None, 7, n_stats).unwrap(), &got) <= 1e-6);
-            }
+            // Chunks do not matter (the point path slices each chunk's corners).
+            let proj = kp.then(|| {
+                let enc = model.net.point_encoder().unwrap();
+                let pyr = prepare(&pts, enc.config()).unwrap();
+                let mut g = Graph::eval_shared(&model.params).with_batch_stats(true);
+                let pf = enc.forward(&mut g, &pyr).unwrap();
+                let proj = model.net.point_projection(&mut g, pf).unwrap();
+                g.value(proj).data().to_vec()
+            });
+            let points = proj.as_deref().map(|p| (p, &corners[..]));
+            assert!(close(&model.score_rows(&x, points, 7, n_stats).unwrap(), &got) <= 1e-6, "kp {kp}");
             let whole = score(&x, &corners, m);
             assert!(close(&whole, &got) > 1e-4, "kp {kp}: the check could not fail");
         }
@@ -1678,10 +1692,11 @@ mod tests {
         // logits must agree to float rounding. Non-trivial BN statistics and weights
         // (a few SGD-free random perturbations) so no block is zero.
         for seed in 0..3u64 {
-            // Seed 2: level 0 on voxels (`input_cell`), several points to a voxel here.
+            // Seed 2: level 0 on voxels (`input_cell`), several points to a voxel here (the
+            // cloud shrunk to radius 0.05 below).
             let mut cfg = ModelConfig::default_kp();
             if seed == 2 {
-                cfg.point_encoder.as_mut().unwrap().input_cell = 10.0;
+                cfg.point_encoder.as_mut().unwrap().input_cell = 1.0;
             }
             let mut m = Model::new(cfg, seed).unwrap();
             let mut rng = Rng::new(10 + seed);
@@ -1690,6 +1705,7 @@ mod tests {
                 .map(|_| {
                     let v = [rng.f32() * 2.0 - 1.0, rng.f32() * 2.0 - 1.0, rng.f32() * 2.0 - 1.0];
                     let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(1e-3);
+                    let l = if seed == 2 { l * 20.0 } else { l };
                     [v[0] / l, v[1] / l, v[2] / l]
                 })
                 .collect();

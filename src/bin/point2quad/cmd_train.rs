@@ -49,8 +49,8 @@ OPTIONS:
     --kp-input-cell F     with a point encoder: its level 0 is the cloud
                           grid-subsampled with cell F × its first cell (each point
                           reads its voxel's features) instead of every point, so its
-                          cost stops growing with the cloud's density (a fresh model
-                          only) [off]
+                          cost stops growing with the cloud's density; 0 < F ≤ 1 (a
+                          fresh model only) [off]
     --epochs N            total epochs, 1..100000 (a resumed run continues up to N;
                           left out, up to the checkpoint's own) [40]
     --resume CKPT         continue exactly from a MODEL.ckpt written earlier: it
@@ -636,6 +636,11 @@ pub fn run(argv: &[String]) -> Result<()> {
                     if !(f.is_finite() && f > 0.0) {
                         return Err(Error::Usage(format!(
                             "train: {opt} must be a finite number > 0, got {v}"
+                        )));
+                    }
+                    if opt == "--kp-input-cell" && f > 1.0 {
+                        return Err(Error::Usage(format!(
+                            "train: {opt} must be at most 1 (first cells: level 0's voxels finer than level 1's), got {v}"
                         )));
                     }
                     if opt == "--kp-spacing-cells" {

@@ -29,6 +29,28 @@ fn assert_close(a: &[f32], b: &[f32], tol: f32) {
     }
 }
 
+/// The eval-mode check of the piecewise-linear tests below (small step, few switches).
+fn piecewise_linear() -> GradCheckConfig {
+    GradCheckConfig { eps: 1e-4, max_per_param: 6, seed: 3, train: false, ..GradCheckConfig::default() }
+}
+
+/// Gradient check of a fresh network for `cfg` on `pyr`: passes, with more than
+/// `min_checked` entries checked.
+fn check_grads(cfg: &KpfcnnConfig, pyr: &PointPyramid, gc: &GradCheckConfig, min_checked: usize) {
+    let mut ps = ParamStore::new();
+    let net = Kpfcnn::new(cfg, &mut ps).unwrap();
+    let rep = gradcheck(&mut ps, |g| net.forward(g, pyr), gc).unwrap();
+    assert!(
+        rep.passed(gc),
+        "worst {} skipped {} of {}: {:?}",
+        rep.worst_ratio,
+        rep.skipped,
+        rep.checked,
+        rep.failures
+    );
+    assert!(rep.checked > min_checked, "{}", rep.checked);
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(24))]
 
@@ -70,20 +92,7 @@ fn whole_small_kpfcnn_gradcheck_piecewise_linear() {
     let pyr = prepare(&pts, &cfg).unwrap();
     assert_eq!(pyr.points.iter().map(|l| l.len()).collect::<Vec<_>>(), vec![90, 77, 32]);
     assert!(pyr.pool.iter().all(|nb| nb.cap > 1), "max-pool must see several neighbours");
-    let mut ps = ParamStore::new();
-    let net = Kpfcnn::new(&cfg, &mut ps).unwrap();
-    let gc =
-        GradCheckConfig { eps: 1e-4, max_per_param: 6, seed: 3, train: false, ..GradCheckConfig::default() };
-    let rep = gradcheck(&mut ps, |g| net.forward(g, &pyr), &gc).unwrap();
-    assert!(
-        rep.passed(&gc),
-        "worst {} skipped {} of {}: {:?}",
-        rep.worst_ratio,
-        rep.skipped,
-        rep.checked,
-        rep.failures
-    );
-    assert!(rep.checked > 300, "{}", rep.checked);
+    check_grads(&cfg, &pyr, &piecewise_linear(), 300);
 }
 
 /// Train mode (batch statistics, a smooth function of the parameters here): one level, so no
@@ -102,19 +111,8 @@ fn single_level_kpfcnn_gradcheck_train_mode() {
     };
     let pts = kpc::sphere_cloud(90, 0.5, [0.0; 3], 1);
     let pyr = prepare(&pts, &cfg).unwrap();
-    let mut ps = ParamStore::new();
-    let net = Kpfcnn::new(&cfg, &mut ps).unwrap();
     let gc = GradCheckConfig { max_per_param: 8, seed: 5, train: true, ..GradCheckConfig::default() };
-    let rep = gradcheck(&mut ps, |g| net.forward(g, &pyr), &gc).unwrap();
-    assert!(
-        rep.passed(&gc),
-        "worst {} skipped {} of {}: {:?}",
-        rep.worst_ratio,
-        rep.skipped,
-        rep.checked,
-        rep.failures
-    );
-    assert!(rep.checked > 100, "{}", rep.checked);
+    check_grads(&cfg, &pyr, &gc, 100);
 }
 
 #[test]
@@ -419,20 +417,7 @@ fn input_cell_kpfcnn_gradcheck_piecewise_linear() {
     let twice: Vec<[f32; 3]> = pts.iter().chain(&pts).copied().collect();
     let pyr = prepare(&twice, &cfg).unwrap();
     assert_eq!((pyr.points[0].len(), pyr.num_inputs()), (90, 180));
-    let mut ps = ParamStore::new();
-    let net = Kpfcnn::new(&cfg, &mut ps).unwrap();
-    let gc =
-        GradCheckConfig { eps: 1e-4, max_per_param: 6, seed: 3, train: false, ..GradCheckConfig::default() };
-    let rep = gradcheck(&mut ps, |g| net.forward(g, &pyr), &gc).unwrap();
-    assert!(
-        rep.passed(&gc),
-        "worst {} skipped {} of {}: {:?}",
-        rep.worst_ratio,
-        rep.skipped,
-        rep.checked,
-        rep.failures
-    );
-    assert!(rep.checked > 300, "{}", rep.checked);
+    check_grads(&cfg, &pyr, &piecewise_linear(), 300);
 }
 
 /// `median_spacing` equals a brute-force median of each point's nearest distinct

@@ -89,6 +89,34 @@ fn ref_nonmanifold_vertices(m: &PolyMesh) -> usize {
 const IDENTITY: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
 /// Diagonal of the axis-aligned bounding box of the vertices.
+/// Reference boundary loops: a flood fill over the valence-1 edges through shared
+/// vertices; (pieces, pieces with an odd number of edges).
+fn ref_boundary_loops(val: &BTreeMap<(u32, u32), usize>) -> (usize, usize) {
+    let border: Vec<(u32, u32)> = val.iter().filter(|(_, &c)| c == 1).map(|(&e, _)| e).collect();
+    let mut seen = vec![false; border.len()];
+    let (mut loops, mut odd) = (0, 0);
+    for start in 0..border.len() {
+        if seen[start] {
+            continue;
+        }
+        seen[start] = true;
+        let (mut stack, mut size) = (vec![start], 0usize);
+        while let Some(e) = stack.pop() {
+            size += 1;
+            let (a, b) = border[e];
+            for (j, &(c, d)) in border.iter().enumerate() {
+                if !seen[j] && (c == a || c == b || d == a || d == b) {
+                    seen[j] = true;
+                    stack.push(j);
+                }
+            }
+        }
+        loops += 1;
+        odd += size % 2;
+    }
+    (loops, odd)
+}
+
 fn bbox_diag(m: &PolyMesh) -> f64 {
     let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
     for p in &m.vertices {
@@ -157,11 +185,43 @@ proptest! {
         let expect_w = if val.is_empty() { 0.0 } else { two as f64 / val.len() as f64 };
         prop_assert!(close(mm.watertightness, expect_w, 1e-12));
         prop_assert_eq!(mm.nonmanifold_vertices, ref_nonmanifold_vertices(&m));
+        prop_assert_eq!((mm.boundary_loops, mm.odd_boundary_loops), ref_boundary_loops(&val));
         let used: BTreeSet<u32> = m.faces.iter().flatten().copied().collect();
         prop_assert_eq!(mm.unreferenced_vertices, nverts as usize - used.len());
         for x in [mm.scaled_jacobian, mm.edge_ratio, mm.angle_dev_deg, mm.angle_rms_deg, mm.manifoldness] {
             prop_assert!(x.is_finite());
         }
+    }
+
+    /// Holes punched in a quad grid or torus: the boundary loops match the flood fill,
+    /// and, the mesh being all quads, the odd ones come in pairs (4F = 2·interior +
+    /// border edges, so the border is even). A torus with nothing removed has none, a
+    /// grid one even loop; a lone triangle adds an odd one.
+    #[test]
+    fn boundary_loops_of_punched_quad_meshes(
+        kind in 0u8..2, nu in 3u32..9, nv in 3u32..9, drop in prop::collection::vec(any::<prop::sample::Index>(), 0..12),
+    ) {
+        let mut m = shape(kind, nu, nv, 0.0, 1);
+        let whole = mesh_metrics(&m);
+        prop_assert_eq!((whole.boundary_loops, whole.odd_boundary_loops), if kind == 0 { (1, 0) } else { (0, 0) });
+        for d in &drop {
+            if !m.faces.is_empty() {
+                let i = d.index(m.faces.len());
+                m.faces.swap_remove(i);
+            }
+        }
+        let mm = mesh_metrics(&m);
+        prop_assert_eq!((mm.boundary_loops, mm.odd_boundary_loops), ref_boundary_loops(&ref_valences(&m)));
+        prop_assert_eq!(mm.odd_boundary_loops % 2, 0);
+        // A lone triangle beside it is one more loop, an odd one.
+        let n = m.vertices.len() as u32;
+        m.vertices.extend([[9.0, 9.0, 9.0], [10.0, 9.0, 9.0], [9.0, 10.0, 9.0]]);
+        m.faces.push(vec![n, n + 1, n + 2]);
+        let with_tri = mesh_metrics(&m);
+        prop_assert_eq!(
+            (with_tri.boundary_loops, with_tri.odd_boundary_loops),
+            (mm.boundary_loops + 1, mm.odd_boundary_loops + 1)
+        );
     }
 
     /// Every metric is unchanged by a rigid motion with uniform scale.

@@ -45,6 +45,14 @@ pub struct MeshMetrics {
     pub edges: usize,
     /// Edges used by exactly one face side.
     pub boundary_edges: usize,
+    /// Connected pieces of the boundary edges (joined at shared vertices): the holes
+    /// and borders; a vertex where two loops touch joins them into one.
+    pub boundary_loops: usize,
+    /// Boundary loops with an odd number of edges. A quad patch always has an even
+    /// number of border edges (4F = 2·interior + border), so such a hole cannot be
+    /// closed by quads over its own vertices: only paired with another odd one, through
+    /// the faces between them.
+    pub odd_boundary_loops: usize,
     /// Edges used by more than two face sides.
     pub nonmanifold_edges: usize,
     /// Vertices whose incident faces form more than one fan (connected through
@@ -167,6 +175,26 @@ impl Dsu {
             self.0[ra.max(rb) as usize] = ra.min(rb);
         }
     }
+}
+
+/// [`MeshMetrics::boundary_loops`] and [`MeshMetrics::odd_boundary_loops`]: the connected
+/// pieces of the valence-1 edges, and those with an odd number of edges.
+fn boundary_loop_counts(edges: &[EdgeUse]) -> (usize, usize) {
+    let border: Vec<[u32; 2]> = edges.iter().filter(|e| e.faces == 1).map(|e| e.verts).collect();
+    let mut ids: Vec<u32> = border.iter().flatten().copied().collect();
+    ids.sort_unstable();
+    ids.dedup();
+    let id = |v: u32| ids.binary_search(&v).expect("internal error: a border vertex without an id") as u32;
+    let mut dsu = Dsu((0..ids.len() as u32).collect());
+    for &[a, b] in &border {
+        dsu.union(id(a), id(b));
+    }
+    let mut count = vec![0usize; ids.len()];
+    for &[a, _] in &border {
+        count[dsu.find(id(a)) as usize] += 1;
+    }
+    let roots = (0..ids.len() as u32).filter(|&i| dsu.find(i) == i);
+    roots.fold((0, 0), |(n, odd), r| (n + 1, odd + count[r as usize] % 2))
 }
 
 /// Counts vertices whose incident face corners form more than one fan. Two corners
@@ -327,6 +355,7 @@ pub fn mesh_metrics(mesh: &PolyMesh) -> MeshMetrics {
     let boundary = edges.iter().filter(|e| e.faces == 1).count();
     let two = edges.iter().filter(|e| e.faces == 2).count();
     let nonmanifold = edges.iter().filter(|e| e.faces > 2).count();
+    let (boundary_loops, odd_boundary_loops) = boundary_loop_counts(&edges);
 
     let mut referenced = vec![false; mesh.vertices.len()];
     for &v in mesh.faces.iter().flatten() {
@@ -371,6 +400,8 @@ pub fn mesh_metrics(mesh: &PolyMesh) -> MeshMetrics {
         quad_only: quads == mesh.faces.len(),
         edges: edges.len(),
         boundary_edges: boundary,
+        boundary_loops,
+        odd_boundary_loops,
         nonmanifold_edges: nonmanifold,
         nonmanifold_vertices: count_nonmanifold_vertices(mesh),
         watertightness: ratio(two, edges.len()),

@@ -111,6 +111,8 @@ fn to_json(m: &MeshMetrics, gt: Option<&GtMetrics>) -> String {
         ("faces", m.faces.to_string()),
         ("quad_only", m.quad_only.to_string()),
         ("boundary_edges", m.boundary_edges.to_string()),
+        ("boundary_loops", m.boundary_loops.to_string()),
+        ("odd_boundary_loops", m.odd_boundary_loops.to_string()),
         ("nonmanifold_edges", m.nonmanifold_edges.to_string()),
         ("nonmanifold_vertices", m.nonmanifold_vertices.to_string()),
         ("watertightness", num(m.watertightness)),
@@ -154,6 +156,10 @@ fn to_table(path: &str, m: &MeshMetrics, gt: Option<&GtMetrics>) -> String {
     row("quad only", if m.quad_only { "yes" } else { "no" }.into());
     row("edges", m.edges.to_string());
     row("boundary edges", m.boundary_edges.to_string());
+    row(
+        "boundary loops",
+        format!("{} ({} odd: not closable by quads alone)", m.boundary_loops, m.odd_boundary_loops),
+    );
     row("non-manifold edges", m.nonmanifold_edges.to_string());
     row("non-manifold vertices", m.nonmanifold_vertices.to_string());
     row("watertightness", format!("{:.4}", m.watertightness));

@@ -40,14 +40,7 @@ fn check_grads(cfg: &KpfcnnConfig, pyr: &PointPyramid, gc: &GradCheckConfig, min
     let mut ps = ParamStore::new();
     let net = Kpfcnn::new(cfg, &mut ps).unwrap();
     let rep = gradcheck(&mut ps, |g| net.forward(g, pyr), gc).unwrap();
-    assert!(
-        rep.passed(gc),
-        "worst {} skipped {} of {}: {:?}",
-        rep.worst_ratio,
-        rep.skipped,
-        rep.checked,
-        rep.failures
-    );
+    kpc::assert_report_passed(&rep, gc);
     assert!(rep.checked > min_checked, "{}", rep.checked);
 }
 

@@ -79,14 +79,7 @@ fn whole_model_gradcheck(cfg: ModelConfig, m: usize, gc: &GradCheckConfig) -> (u
         gc,
     )
     .unwrap();
-    assert!(
-        rep.passed(gc),
-        "worst {} skipped {} of {}: {:?}",
-        rep.worst_ratio,
-        rep.skipped,
-        rep.checked,
-        rep.failures
-    );
+    kpc::assert_report_passed(&rep, gc);
     (rep.checked, rep.skipped)
 }
 

@@ -638,9 +638,9 @@ impl Model {
     /// reads the statistics of the cloud's candidates: up to `stats_rows`
     /// ([`CLOUD_STATS_ROWS`] outside tests) rows they are one batch; beyond, the
     /// statistics are those of an even spread of `stats_rows` rows (row ⌊i·m/N⌋ for
-    /// i < N), and every row is then scored in
-    /// chunks with them, so memory stays bounded as with running statistics. (Training
-    /// draws at most 12,000 candidates of a cloud a step: its statistics were samples too.)
+    /// i < N), and every row is then scored in chunks with them, so memory stays bounded
+    /// as with running statistics. (Training draws at most 12,000 candidates of a cloud a
+    /// step: its statistics were samples too.)
     fn score_rows(
         &self,
         face_features: &[f32],
@@ -1110,13 +1110,12 @@ impl Network {
         let mut pre = g.value(code).data().to_vec();
         g.free(code);
         {
-            let p = proj;
             const ROWS: usize = 256;
             crate::par::for_each_chunk_mut(&mut pre, ROWS * cout, |ch, block| {
                 for (r, row) in block.chunks_exact_mut(cout).enumerate() {
                     let c = corners[ch * ROWS + r];
                     for (i, &v) in c.iter().enumerate() {
-                        let src = &p[v as usize * 4 * cout + i * cout..][..cout];
+                        let src = &proj[v as usize * 4 * cout + i * cout..][..cout];
                         for (a, b) in row.iter_mut().zip(src) {
                             *a += b;
                         }

@@ -117,3 +117,19 @@ pub fn tiny_config() -> point2quad::nn::kpfcnn::KpfcnnConfig {
         ..point2quad::nn::kpfcnn::KpfcnnConfig::default_preset()
     }
 }
+
+/// Asserts that a gradient check of a KPFCNN or whole model passed under `gc`, naming
+/// the worst ratio, the skipped and checked counts and the failures when it did not.
+pub fn assert_report_passed(
+    rep: &point2quad::tensor::GradCheckReport,
+    gc: &point2quad::tensor::GradCheckConfig,
+) {
+    assert!(
+        rep.passed(gc),
+        "worst {} skipped {} of {}: {:?}",
+        rep.worst_ratio,
+        rep.skipped,
+        rep.checked,
+        rep.failures
+    );
+}

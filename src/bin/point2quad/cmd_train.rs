@@ -4,6 +4,7 @@
 use crate::args::{Args, Spec};
 use crate::output::say;
 use point2quad::nn::checkpoint::{self, Checkpoint, Fnv1a, TrainState};
+use point2quad::nn::kpfcnn::KpfcnnConfig;
 use point2quad::pipeline::dataset::{load_sample, noise_variant, Sample, EXTENSION, VARIANT_SEP};
 use point2quad::pipeline::model::{Model, ModelConfig};
 use point2quad::pipeline::train::{train, Progress, TrainConfig};
@@ -117,6 +118,18 @@ const SPEC: Spec = Spec {
     ],
     switches: &["--no-rotate", "--no-augment", "--sign-free-normals"],
 };
+
+/// The point encoder's number options of a fresh model: flag, upper bound (with why)
+/// if any, and the config field it sets. Each takes a finite value > 0.
+type KpField = fn(&mut KpfcnnConfig) -> &mut f32;
+/// An upper bound and why.
+type Bound = Option<(f32, &'static str)>;
+const KP_OPTIONS: [(&str, Bound, KpField); 2] = [
+    ("--kp-spacing-cells", None, |k| &mut k.spacing_cells),
+    ("--kp-input-cell", Some((1.0, "first cells: level 0's voxels finer than level 1's")), |k| {
+        &mut k.input_cell
+    }),
+];
 
 fn fnv(s: &str) -> u64 {
     point2quad::nn::checkpoint::fnv1a64(s.as_bytes())
@@ -535,7 +548,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     augmentation(&a, &mut cfg)?;
     // These options shape a fresh model's config; --init and --resume read theirs from a file.
     let from_file = a.value("--init").is_some() || a.value("--resume").is_some();
-    for opt in ["--kp-spacing-cells", "--kp-input-cell"] {
+    for &(opt, ..) in &KP_OPTIONS {
         if a.value(opt).is_some() && from_file {
             return Err(Error::Usage(format!(
                 "train: {opt} cannot be combined with --init or --resume (the weights file holds its config)"
@@ -624,7 +637,7 @@ pub fn run(argv: &[String]) -> Result<()> {
             None => {
                 let mut config = ModelConfig::preset(a.value("--config").unwrap_or("default"))?;
                 config.sign_free_normals = a.switch("--sign-free-normals");
-                for opt in ["--kp-spacing-cells", "--kp-input-cell"] {
+                for &(opt, at_most, field) in &KP_OPTIONS {
                     let Some(v) = a.value(opt) else { continue };
                     let f: f32 = a.parsed(cmd, opt, 0.0f32)?;
                     let Some(kp) = config.point_encoder.as_mut() else {
@@ -638,16 +651,12 @@ pub fn run(argv: &[String]) -> Result<()> {
                             "train: {opt} must be a finite number > 0, got {v}"
                         )));
                     }
-                    if opt == "--kp-input-cell" && f > 1.0 {
+                    if let Some((max, why)) = at_most.filter(|&(max, _)| f > max) {
                         return Err(Error::Usage(format!(
-                            "train: {opt} must be at most 1 (first cells: level 0's voxels finer than level 1's), got {v}"
+                            "train: {opt} must be at most {max} ({why}), got {v}"
                         )));
                     }
-                    if opt == "--kp-spacing-cells" {
-                        kp.spacing_cells = f;
-                    } else {
-                        kp.input_cell = f;
-                    }
+                    *field(kp) = f;
                 }
                 (Model::new(config, cfg.seed)?, None)
             }

@@ -181,6 +181,381 @@ fn one_mesh() {
     println!("below 0.1: {}", ratios.iter().filter(|&&r| r < 0.1).count());
 }
 
+/// Per `train/` mesh: faces, and the true faces missed clean and with 10% noise, split by
+/// whether some corner has the other three among its 20 nearest (proposable: lost to a
+/// filter or the ranking) or not (beyond the kNN proposal).
+fn per_mesh() {
+    let files = mesh_files("train").unwrap();
+    let cfg = cfg_from_env();
+    let mut tot = [0usize; 5];
+    println!("mesh faces | clean missed (proposable) | noisy missed (proposable)");
+    for path in &files {
+        let mesh = load_quad_mesh(path);
+        let mut row = [mesh.quads.len(), 0, 0, 0, 0];
+        for (s, noisy) in [false, true].into_iter().enumerate() {
+            let pts = if noisy { noisy_cloud(&mesh, 1) } else { mesh.vertices.clone() };
+            let (_, c) = coverage(&pts, &mesh.quads, &cfg);
+            let have: HashSet<[u32; 4]> = c.quads.iter().map(key).collect();
+            let frame = point2quad::pipeline::frame::Frame::fit(&pts).unwrap();
+            let local = frame.to_local_all(&pts);
+            let knn = knn_table(&local, cfg.k);
+            let sets: Vec<HashSet<u32>> =
+                (0..local.len()).map(|i| kset(&knn, i, cfg.k).into_iter().collect()).collect();
+            for f in mesh.quads.iter().filter(|f| !have.contains(&key(f))) {
+                row[1 + 2 * s] += 1;
+                if (0..4).any(|x| (1..4).all(|d| sets[f[x] as usize].contains(&f[(x + d) % 4]))) {
+                    row[2 + 2 * s] += 1;
+                }
+            }
+        }
+        let name = path.file_stem().unwrap().to_string_lossy();
+        println!("{name} {} | {} ({}) | {} ({})", row[0], row[1], row[2], row[3], row[4]);
+        for (t, r) in tot.iter_mut().zip(row) {
+            *t += r;
+        }
+    }
+    println!("TOTAL {} | {} ({}) | {} ({})", tot[0], tot[1], tot[2], tot[3], tot[4]);
+}
+
+/// Prototype: parallelogram completion from a near neighbour a and a direction-diverse b.
+fn pgram() {
+    use point2quad::spatial::kdtree::KdTree;
+    let files = mesh_files("train").unwrap();
+    let cfg = cfg_from_env();
+    let ka = envf("PA", 8.0) as usize;
+    let kf = envf("FK", 64.0) as usize;
+    let v = envf("FV", 12.0) as usize;
+    let cos_t = (envf("FT", 30.0) as f32).to_radians().cos();
+    let tau = envf("PT", 0.5) as f32;
+    let rmin = envf("PR", 0.03) as f32;
+    let keepn = envf("PK", 8.0) as usize;
+    let only = std::env::var("DM").unwrap_or_default();
+    let verbose = envf("PV", 0.0) > 0.0;
+    let curve = envf("PC", 0.0) > 0.0;
+    for noisy in [false, true] {
+        let mut curve_acc = [(0usize, 0usize); 9];
+        let (mut faces, mut cov0, mut cov1, mut nc0, mut nc1, mut npts) =
+            (0usize, 0usize, 0usize, 0usize, 0usize, 0usize);
+        for path in files.iter().filter(|p| p.to_string_lossy().contains(&only)) {
+            let mesh = load_quad_mesh(path);
+            let pts = if noisy { noisy_cloud(&mesh, 1) } else { mesh.vertices.clone() };
+            let (c0, c) = coverage(&pts, &mesh.quads, &cfg);
+            let frame = point2quad::pipeline::frame::Frame::fit(&pts).unwrap();
+            let local = frame.to_local_all(&pts);
+            let n = local.len();
+            let tree = KdTree::build(&local);
+            let knn = knn_table(&local, kf);
+            let mut have: HashSet<[u32; 4]> = c.quads.iter().map(key).collect();
+            let main_keys = have.clone();
+            let mut lists: Vec<Vec<[u32; 4]>> = vec![];
+            let base = have.len();
+            let sub3 = |a: [f32; 3], b: [f32; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+            let crs = |a: [f32; 3], b: [f32; 3]| {
+                [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+            };
+            let dt = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+            let nrm = |a: [f32; 3]| dt(a, a).sqrt();
+            for i in 0..n {
+                let (idx, _) = knn.row(i);
+                let p = local[i];
+                let near: Vec<u32> = idx.iter().copied().filter(|&j| j as usize != i).take(ka).collect();
+                let mut div: Vec<(u32, [f32; 3])> = vec![];
+                for &j in idx {
+                    if j as usize == i || div.len() >= v {
+                        continue;
+                    }
+                    let d = sub3(local[j as usize], p);
+                    let dl = nrm(d);
+                    if dl == 0.0 {
+                        continue;
+                    }
+                    let t = [d[0] / dl, d[1] / dl, d[2] / dl];
+                    if div.iter().all(|(_, r)| dt(*r, t) < cos_t) {
+                        div.push((j, t));
+                    }
+                }
+                let mut found: Vec<(f32, [u32; 4])> = vec![];
+                let pb_n = envf("PB", 0.0) as usize;
+                let mut bs: Vec<u32> = vec![];
+                for &(b0, _) in &div {
+                    if !bs.contains(&b0) {
+                        bs.push(b0);
+                    }
+                    if near.contains(&b0) {
+                        continue;
+                    }
+                    let (bidx, _) = knn.row(b0 as usize);
+                    for &bb in bidx.iter().filter(|&&j| j != b0 && j as usize != i).take(pb_n) {
+                        if !bs.contains(&bb) {
+                            bs.push(bb);
+                        }
+                    }
+                }
+                for &a in &near {
+                    for &b in &bs {
+                        if a == b {
+                            continue;
+                        }
+                        let (pa, pb) = (local[a as usize], local[b as usize]);
+                        let la = nrm(sub3(pa, p));
+                        let lb = nrm(sub3(pb, p));
+                        let ua = sub3(pa, p).map(|c| c / la);
+                        let ub = sub3(pb, p).map(|c| c / lb);
+                        // x: of b's near neighbours, the one whose sides best parallel p's
+                        let mut bestx = None;
+                        let mut bests = -1.0f32;
+                        let (bidx, _) = knn.row(b as usize);
+                        for &x in bidx.iter().filter(|&&j| j != b).take(ka) {
+                            if x as usize == i || x == a {
+                                continue;
+                            }
+                            let px = local[x as usize];
+                            let (dxb, dxa) = (sub3(px, pb), sub3(px, pa));
+                            let (lxb, lxa) = (nrm(dxb), nrm(dxa));
+                            if lxb == 0.0 || lxa == 0.0 {
+                                continue;
+                            }
+                            let c1 = dt(dxb, ua) / lxb;
+                            let c2 = dt(dxa, ub) / lxa;
+                            if c1.min(c2) > bests {
+                                bests = c1.min(c2);
+                                bestx = Some(x);
+                            }
+                        }
+                        let Some(x) = bestx else { continue };
+                        if bests < tau {
+                            continue;
+                        }
+                        let off = 1.0 - bests;
+                        let q = [i as u32, a, x, b];
+                        let qp = q.map(|k| local[k as usize]);
+                        let mut len = [0f32; 4];
+                        let mut ev = [[0f32; 3]; 4];
+                        for s in 0..4 {
+                            ev[s] = sub3(qp[(s + 1) % 4], qp[s]);
+                            len[s] = nrm(ev[s]);
+                        }
+                        let lmin = len.iter().copied().fold(f32::INFINITY, f32::min);
+                        let lmax = len.iter().copied().fold(0.0, f32::max);
+                        if !(lmin > rmin * lmax) {
+                            continue;
+                        }
+                        let mut cn = [[0f32; 3]; 4];
+                        let mut okq = true;
+                        for s in 0..4 {
+                            let cc = crs(ev[(s + 3) % 4], ev[s]);
+                            let cl = nrm(cc);
+                            let sine = cl / (len[(s + 3) % 4] * len[s]);
+                            if !(sine >= cfg.min_sine) {
+                                okq = false;
+                                break;
+                            }
+                            cn[s] = [cc[0] / cl, cc[1] / cl, cc[2] / cl];
+                        }
+                        if !okq || (0..4).any(|s| (0..s).any(|t| dt(cn[s], cn[t]) < cfg.min_normal_dot)) {
+                            continue;
+                        }
+                        // points inside the quad (plane tolerance, edge margin)
+                        let nd = crs(sub3(qp[2], qp[0]), sub3(qp[3], qp[1]));
+                        let nl = nrm(nd);
+                        if nl == 0.0 {
+                            continue;
+                        }
+                        let nq = nd.map(|c| c / nl);
+                        let lbar = (len[0] + len[1] + len[2] + len[3]) / 4.0;
+                        let ptol = envf("PPT", 0.3) as f32 * lbar;
+                        let marg = envf("PM", 0.05) as f32 * lbar;
+                        let mut inside = 0;
+                        for &y in idx {
+                            if q.contains(&y) {
+                                continue;
+                            }
+                            let py = local[y as usize];
+                            if dt(sub3(py, qp[0]), nq).abs() > ptol {
+                                continue;
+                            }
+                            if (0..4).all(|s| dt(crs(ev[s], sub3(py, qp[s])), nq) / len[s] >= -marg) {
+                                inside += 1;
+                            }
+                        }
+                        let wi = envf("PWI", 1.0) as f32;
+                        found.push((off + wi * inside as f32, q));
+                    }
+                }
+                found.sort_by(|x, y| x.0.total_cmp(&y.0));
+                if envf("PD", -1.0) as usize == i {
+                    let gt: HashSet<[u32; 4]> = mesh.quads.iter().map(key).collect();
+                    for (r, (sc, q)) in found.iter().enumerate() {
+                        if r < 15 || gt.contains(&key(q)) {
+                            let l: Vec<String> = (0..4)
+                                .map(|s| {
+                                    format!(
+                                        "{:.4}",
+                                        nrm(sub3(local[q[(s + 1) % 4] as usize], local[q[s] as usize]))
+                                    )
+                                })
+                                .collect();
+                            println!(
+                                "  rank {r} score {sc:.3} {:?} {} len {:?}",
+                                q,
+                                if gt.contains(&key(q)) { "TRUE" } else { "" },
+                                l
+                            );
+                        }
+                    }
+                }
+                let gate = envf("PG", f64::INFINITY) as f32;
+                let mut kept = 0;
+                let mut list = vec![];
+                for (sc, q) in found {
+                    if sc > gate || list.len() >= 64 {
+                        break;
+                    }
+                    let kq = key(&q);
+                    if main_keys.contains(&kq) || list.contains(&kq) {
+                        continue;
+                    }
+                    list.push(kq);
+                    if kept < keepn {
+                        have.insert(kq);
+                        kept += 1;
+                    }
+                }
+                lists.push(list);
+            }
+            if curve {
+                let gt: HashSet<[u32; 4]> = mesh.quads.iter().map(key).collect();
+                for (ci, kk) in [1usize, 2, 4, 8, 12, 16, 24, 32, 64].into_iter().enumerate() {
+                    let mut set: HashSet<[u32; 4]> = HashSet::new();
+                    for l in &lists {
+                        set.extend(l.iter().take(kk).copied());
+                    }
+                    let extra_true = set.iter().filter(|q| gt.contains(*q)).count();
+                    curve_acc[ci].0 += extra_true;
+                    curve_acc[ci].1 += set.len();
+                }
+            }
+            let cov = mesh.quads.iter().filter(|f| have.contains(&key(f))).count();
+            if verbose {
+                // why the missed faces were not proposed: best stage over corners and turns
+                let mut why = [0usize; 9];
+                for f in mesh.quads.iter().filter(|f| !have.contains(&key(f))) {
+                    let mut best = 0;
+                    for s in 0..4 {
+                        for dir in 0..2 {
+                            let (pp, mut a, x, mut b) =
+                                (f[s], f[(s + 1) % 4], f[(s + 2) % 4], f[(s + 3) % 4]);
+                            if dir == 1 {
+                                std::mem::swap(&mut a, &mut b);
+                            }
+                            let (idx, _) = knn.row(pp as usize);
+                            let near: Vec<u32> = idx.iter().copied().filter(|&j| j != pp).take(ka).collect();
+                            let inf = idx.contains(&b);
+                            let mut stage = 0;
+                            if near.contains(&a) {
+                                stage = 1;
+                                if inf {
+                                    stage = 2;
+                                    let (bidx, _) = knn.row(b as usize);
+                                    if bidx.iter().filter(|&&j| j != b).take(ka).any(|&j| j == x) {
+                                        stage = 4;
+                                        // diverse?
+                                        let p0 = local[pp as usize];
+                                        let mut dv: Vec<(u32, [f32; 3])> = vec![];
+                                        for &j in idx {
+                                            if j == pp || dv.len() >= v {
+                                                continue;
+                                            }
+                                            let d = sub3(local[j as usize], p0);
+                                            let dl = nrm(d);
+                                            if dl == 0.0 {
+                                                continue;
+                                            }
+                                            let t = [d[0] / dl, d[1] / dl, d[2] / dl];
+                                            if dv.iter().all(|(_, r)| dt(*r, t) < cos_t) {
+                                                dv.push((j, t));
+                                            }
+                                        }
+                                        if dv.iter().any(|&(j, _)| j == b) {
+                                            stage = 5;
+                                            let q = [pp, a, x, b];
+                                            let qp = q.map(|k| local[k as usize]);
+                                            let mut len = [0f32; 4];
+                                            let mut ev = [[0f32; 3]; 4];
+                                            for s in 0..4 {
+                                                ev[s] = sub3(qp[(s + 1) % 4], qp[s]);
+                                                len[s] = nrm(ev[s]);
+                                            }
+                                            let lmin = len.iter().copied().fold(f32::INFINITY, f32::min);
+                                            let lmax = len.iter().copied().fold(0.0, f32::max);
+                                            if lmin > rmin * lmax {
+                                                stage = 6;
+                                                let mut cn = [[0f32; 3]; 4];
+                                                let mut okq = true;
+                                                for s in 0..4 {
+                                                    let cc = crs(ev[(s + 3) % 4], ev[s]);
+                                                    let cl = nrm(cc);
+                                                    if !(cl / (len[(s + 3) % 4] * len[s]) >= cfg.min_sine) {
+                                                        okq = false;
+                                                    }
+                                                    cn[s] = [cc[0] / cl, cc[1] / cl, cc[2] / cl];
+                                                }
+                                                if okq {
+                                                    stage = 7;
+                                                    if !(0..4).any(|s| {
+                                                        (0..s).any(|t| dt(cn[s], cn[t]) < cfg.min_normal_dot)
+                                                    }) {
+                                                        stage = 8;
+                                                    }
+                                                }
+                                            }
+                                        }
+                                    }
+                                }
+                            }
+                            best = best.max(stage);
+                        }
+                    }
+                    why[best] += 1;
+                }
+                println!("  missed: a not near {} | b beyond FK {} | x not in b's near {} | - {} | b not diverse {} | ratio {} | sine {} | normals {} | ranked out/x not best {}", why[0], why[1], why[2], why[3], why[4], why[5], why[6], why[7], why[8]);
+                println!(
+                    "{} {} {} -> {} ({:.2} -> {:.2}/pt)",
+                    path.file_stem().unwrap().to_string_lossy(),
+                    mesh.quads.len(),
+                    c0.covered,
+                    cov,
+                    base as f64 / n as f64,
+                    have.len() as f64 / n as f64
+                );
+            }
+            faces += mesh.quads.len();
+            cov0 += c0.covered;
+            cov1 += cov;
+            nc0 += base;
+            nc1 += have.len();
+            npts += n;
+        }
+        println!(
+            "{} coverage {:.4} -> {:.4}; per point {:.2} -> {:.2}",
+            if noisy { "noisy" } else { "clean" },
+            cov0 as f64 / faces as f64,
+            cov1 as f64 / faces as f64,
+            nc0 as f64 / npts as f64,
+            nc1 as f64 / npts as f64
+        );
+        if curve {
+            for (ci, kk) in [1usize, 2, 4, 8, 12, 16, 24, 32, 64].into_iter().enumerate() {
+                println!(
+                    "  keep {kk:2}: coverage {:.4} per point {:.2}",
+                    (cov0 + curve_acc[ci].0) as f64 / faces as f64,
+                    (nc0 + curve_acc[ci].1) as f64 / npts as f64
+                );
+            }
+        }
+    }
+}
+
 fn envf(k: &str, d: f64) -> f64 {
     std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d)
 }
@@ -202,6 +577,8 @@ fn cfg_from_env() -> CandidateConfig {
     cfg.continue_rank = envf("DCR", cfg.continue_rank as f64) as u16;
     cfg.continue_snap = envf("DCS", cfg.continue_snap as f64) as f32;
     cfg.continue_steps = envf("DCI", cfg.continue_steps as f64) as usize;
+    cfg.far_per_point = envf("DFP", cfg.far_per_point as f64) as usize;
+    cfg.far_k = envf("DFK", cfg.far_k as f64) as usize;
     cfg
 }
 
@@ -697,6 +1074,8 @@ fn main() {
         Some("ceilings") => ceilings(),
         Some("mesh") => one_mesh(),
         Some("sweep") => sweep(),
+        Some("permesh") => per_mesh(),
+        Some("pgram") => pgram(),
         Some("losses") => losses(),
         Some("far") => far_ceilings(),
         Some("ranks") => ranks(),

@@ -113,6 +113,14 @@ pub struct CandidateConfig {
     pub continue_snap: f32,
     /// Continuation steps: the quads one step adds seed the next.
     pub continue_steps: usize,
+    /// Far completion ([`generate`]'s last step, not in the paper; session 29): quads
+    /// kept per point among those with a corner beyond its `k` nearest, found by
+    /// parallelogram completion towards direction-diverse neighbours. 0 (the default:
+    /// the shipped weights were trained without it) turns it off.
+    pub far_per_point: usize,
+    /// Neighbours (the point itself not counted) scanned for a point's
+    /// direction-diverse neighbours by the far completion.
+    pub far_k: usize,
 }
 
 impl Default for CandidateConfig {
@@ -135,6 +143,8 @@ impl Default for CandidateConfig {
             continue_rank: 2,
             continue_snap: 0.3,
             continue_steps: 3,
+            far_per_point: 0,
+            far_k: 64,
         }
     }
 }
@@ -1039,7 +1049,9 @@ pub const MAX_NEIGHBOURS: usize = 64;
 
 /// `InvalidInput` naming the first neighbour count above [`MAX_NEIGHBOURS`].
 pub fn check_neighbour_counts(cfg: &CandidateConfig) -> Result<()> {
-    for (name, k) in [("k", cfg.k), ("normal_k", cfg.normal_k), ("spacing_k", cfg.spacing_k)] {
+    for (name, k) in
+        [("k", cfg.k), ("normal_k", cfg.normal_k), ("spacing_k", cfg.spacing_k), ("far_k", cfg.far_k)]
+    {
         if k > MAX_NEIGHBOURS {
             return Err(Error::invalid(format!(
                 "candidate setting {name} = {k} is above {MAX_NEIGHBOURS} (work grows with the cube of k)"
@@ -1183,6 +1195,158 @@ fn continuation(cloud: &Cloud<'_>, quads: &[[u32; 4]], rank: &[u16]) -> Vec<([u3
     added
 }
 
+/// How many nearest points of `p` are its near corner `a` in the far completion, and
+/// of the far corner `b` are the fourth corner `x`.
+const FAR_NEAR: usize = 8;
+/// At most this many direction-diverse neighbours per point.
+const FAR_DIRECTIONS: usize = 12;
+/// A direction-diverse neighbour's direction is more than 30° from every one taken
+/// before it: the cosine bound.
+const FAR_DIVERSE_COS: f32 = 0.866_025_4;
+/// The far completion's fourth corner must parallel both far sides at least this well
+/// (cosine, about 37°).
+const FAR_MIN_COS: f32 = 0.8;
+
+/// The direction-diverse neighbours of point `i`: of its `far_k` nearest, by distance
+/// (ties by coordinates, so the choice does not depend on the input order), each whose
+/// direction from `i` is more than 30° from the direction of every one taken before,
+/// at most [`FAR_DIRECTIONS`]. Exact duplicates of `i` are skipped.
+fn diverse_neighbours(points: &[[f32; 3]], far: &KnnTable, i: usize, out: &mut Vec<(u32, [f32; 3])>) {
+    let n = points.len();
+    let p = points[i];
+    let mut row: Vec<(f32, u32)> = {
+        let w = far.indices.len().checked_div(n).unwrap_or(0);
+        far.indices[i * w..(i + 1) * w]
+            .iter()
+            .zip(&far.dist_sq[i * w..(i + 1) * w])
+            .filter(|(&j, _)| j as usize != i)
+            .map(|(&j, &d)| (d, j))
+            .collect()
+    };
+    row.sort_by(|x, y| {
+        x.0.total_cmp(&y.0).then_with(|| {
+            let (a, b) = (points[x.1 as usize], points[y.1 as usize]);
+            a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])).then(a[2].total_cmp(&b[2]))
+        })
+    });
+    out.clear();
+    for (_, j) in row {
+        if out.len() >= FAR_DIRECTIONS {
+            break;
+        }
+        let d = sub(points[j as usize], p);
+        let l = norm(d);
+        if !(l > 0.0) {
+            continue;
+        }
+        let t = [d[0] / l, d[1] / l, d[2] / l];
+        if out.iter().all(|(_, u)| dot(*u, t) <= FAR_DIVERSE_COS) {
+            out.push((j, t));
+        }
+    }
+}
+
+/// Far completion (not in the paper; session 29): quads with a corner beyond the
+/// proposer's `k` nearest, which the proposal cannot see (anisotropic faces whose long
+/// side spans more than 20 neighbours). For each point p and each pair of a near
+/// corner a (one of p's [`FAR_NEAR`] nearest) and a far corner b (one of p's
+/// [`diverse_neighbours`]), the fourth corner x is the point among b's [`FAR_NEAR`]
+/// nearest whose sides best parallel the quad's: the largest
+/// min(cos∠(x − b, a − p), cos∠(x − a, b − p)), at least [`FAR_MIN_COS`] (ties by
+/// coordinates). A quad [p, a, x, b] (either turn) whose vertex set is not yet a
+/// candidate must pass [`Cloud::evaluate_quad`] (the proposal's filters) and is ranked
+/// by its score; each point keeps its `far_per_point` best (ties by coordinates). A
+/// vertex set kept by several points keeps its best score. Returns the quads
+/// (canonical cyclic order) with score and inside count, sorted by vertex set.
+fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, u16)> {
+    let (points, cfg) = (cloud.points, cloud.cfg);
+    let n = points.len();
+    if cfg.far_per_point == 0 || n < 4 {
+        return Vec::new();
+    }
+    let far = knn_table(points, cfg.far_k);
+    let have: std::collections::HashSet<[u32; 4]> = quads.iter().map(vertex_set).collect();
+    const CHUNK: usize = 64;
+    let chunks: Vec<Vec<([u32; 4], [u32; 4], f32, u16)>> = crate::par::map(n.div_ceil(CHUNK), |ch| {
+        let mut kept = Vec::new();
+        let mut div = Vec::new();
+        let mut found: Vec<([u32; 4], [u32; 4], f32, u16)> = Vec::new();
+        for i in ch * CHUNK..((ch + 1) * CHUNK).min(n) {
+            let p = points[i];
+            diverse_neighbours(points, &far, i, &mut div);
+            let near: Vec<u32> = neighbours(cloud.knn, n, i, FAR_NEAR).collect();
+            found.clear();
+            for &a in &near {
+                let ea = sub(points[a as usize], p);
+                let la = norm(ea);
+                if !(la > 0.0) {
+                    continue;
+                }
+                for &(b, ub) in &div {
+                    if b == a {
+                        continue;
+                    }
+                    let ua = [ea[0] / la, ea[1] / la, ea[2] / la];
+                    let (pa, pb) = (points[a as usize], points[b as usize]);
+                    let mut best: Option<(f32, u32)> = None;
+                    for x in neighbours(cloud.knn, n, b as usize, FAR_NEAR) {
+                        if x as usize == i || x == a {
+                            continue;
+                        }
+                        let px = points[x as usize];
+                        let (exb, exa) = (sub(px, pb), sub(px, pa));
+                        let (lxb, lxa) = (norm(exb), norm(exa));
+                        if !(lxb > 0.0 && lxa > 0.0) {
+                            continue;
+                        }
+                        let c = (dot(exb, ua) / lxb).min(dot(exa, ub) / lxa);
+                        let better = match best {
+                            None => true,
+                            Some((bc, bx)) => {
+                                c > bc
+                                    || (c == bc && {
+                                        let (u, v) = (points[x as usize], points[bx as usize]);
+                                        u[0].total_cmp(&v[0])
+                                            .then(u[1].total_cmp(&v[1]))
+                                            .then(u[2].total_cmp(&v[2]))
+                                            .is_lt()
+                                    })
+                            }
+                        };
+                        if better {
+                            best = Some((c, x));
+                        }
+                    }
+                    let Some((c, x)) = best else { continue };
+                    if !(c >= FAR_MIN_COS) {
+                        continue;
+                    }
+                    let q = [i as u32, a, x, b];
+                    let key = vertex_set(&q);
+                    if have.contains(&key) || found.iter().any(|f| f.0 == key) {
+                        continue;
+                    }
+                    let turn = [i as u32, b, x, a];
+                    let best_turn = [q, turn]
+                        .into_iter()
+                        .filter_map(|r| cloud.evaluate_quad(r).map(|(sc, ins)| (r, sc, ins)))
+                        .min_by(|x, y| x.1.total_cmp(&y.1));
+                    if let Some((r, sc, ins)) = best_turn {
+                        found.push((key, canonical(r), sc, ins));
+                    }
+                }
+            }
+            found.sort_by(|x, y| x.2.total_cmp(&y.2).then_with(|| coord_order(points, &x.1, &y.1)));
+            kept.extend(found.iter().take(cfg.far_per_point).copied());
+        }
+        kept
+    });
+    let mut all: Vec<([u32; 4], [u32; 4], f32, u16)> = chunks.into_iter().flatten().collect();
+    all.sort_unstable_by(|x, y| x.0.cmp(&y.0).then(x.2.total_cmp(&y.2)).then(x.1.cmp(&y.1)));
+    all.dedup_by(|later, first| later.0 == first.0);
+    all.into_iter().map(|(_, q, sc, ins)| (q, sc, ins)).collect()
+}
+
 /// Generates the candidate quads of a cloud (in the normalised frame, though any
 /// scale works: everything is relative to the local spacing).
 ///
@@ -1257,6 +1421,17 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
         // Beyond every proposer's budget, proposed by none of the corners' lists.
         let beyond = cfg.per_point.min(u16::MAX as usize) as u16;
         for (q, sc, ins) in continuation(&cloud, &quads, &rank) {
+            quads.push(q);
+            proposers.push(1);
+            rank.push(beyond);
+            score.push(sc);
+            inside.push(ins);
+        }
+    }
+    if cfg.far_per_point > 0 {
+        let cloud = Cloud { points, normals: &normals, spacing: &spacing, knn: &knn, cfg };
+        let beyond = cfg.per_point.min(u16::MAX as usize) as u16;
+        for (q, sc, ins) in far_completion(&cloud, &quads) {
             quads.push(q);
             proposers.push(1);
             rank.push(beyond);

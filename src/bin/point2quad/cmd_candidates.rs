@@ -12,6 +12,7 @@ point2quad candidates: candidate quads of a point cloud (from the points alone)
 
 USAGE:
     point2quad candidates INPUT -o CAND.txt [--k K] [--per-point P] [--continue-rank R]
+                          [--far F]
 
 ARGS:
     INPUT            points: .xyz/.txt/.pts/.csv (x y z columns), .ply, .obj (v lines), .off
@@ -27,6 +28,10 @@ OPTIONS:
                      lattice continuation: candidates ranked below R propose the
                      quads across their sides, snapped to the nearest points
                      (default 2, as `reconstruct`; 0 turns it off; 0 to 1000)
+    --far F          far completion: each point also keeps its F best quads with a
+                     corner beyond its k nearest, completed as parallelograms
+                     towards its direction-diverse neighbours (anisotropic faces;
+                     default 0, off, as `reconstruct`; 0 to 64)
     -h, --help       this text
 
 The input is cleaned as `reconstruct` cleans it: exact and near-duplicate points
@@ -45,6 +50,17 @@ pub const MAX_K: usize = point2quad::pipeline::reconstruct::MAX_NEIGHBOURS;
 /// stays a bounded multiple of the cloud.
 pub const MAX_PER_POINT: usize = 1024;
 
+/// Largest `--far` (here, in `reconstruct` and `dataset`): a point's far quads come
+/// from at most 8 × 12 (near, diverse) pairs, so 64 keeps nearly all of them.
+pub const MAX_FAR: usize = 64;
+
+/// Reads `--far` into `cfg.far_per_point` (0 to [`MAX_FAR`]).
+pub fn parse_far(args: &Args, cmd: &str, cfg: &mut CandidateConfig) -> Result<()> {
+    cfg.far_per_point =
+        args.parsed_in(cmd, "--far", cfg.far_per_point, 0, MAX_FAR, "a point has at most 96 far pairs")?;
+    Ok(())
+}
+
 /// Runs the subcommand.
 ///
 /// # Errors
@@ -52,7 +68,8 @@ pub const MAX_PER_POINT: usize = 1024;
 /// `InvalidInput` for clouds that cannot give candidates (fewer than 4 points, NaN).
 pub fn run(argv: &[String]) -> Result<()> {
     const CMD: &str = "candidates";
-    let spec = Spec { valued: &["-o", "--output", "--k", "--per-point", "--continue-rank"], switches: &[] };
+    let spec =
+        Spec { valued: &["-o", "--output", "--k", "--per-point", "--continue-rank", "--far"], switches: &[] };
     let args = Args::parse(CMD, argv, &spec)?;
     let input = &args.expect_positional(CMD, 1, "one INPUT file")?[0];
     let output = match args.value("-o").or(args.value("--output")) {
@@ -79,6 +96,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         1000,
         "a rank among a point's candidates",
     )? as u16;
+    parse_far(&args, CMD, &mut cfg)?;
     let t0 = std::time::Instant::now();
     let points = point2quad::io::points::read_points(std::path::Path::new(input))?;
     let t_read = t0.elapsed();

@@ -71,6 +71,9 @@ OPTIONS:
     --per-point P     candidates kept per proposing point before de-duplication,
                       as `reconstruct --per-point` (1 to 1024) [32]; a model
                       trained on such data wants the same value at reconstruct
+    --far F           far completion in the candidates, as `reconstruct --far`
+                      (0 to 64) [0]; a model trained on such data wants the same
+                      value at reconstruct
 
 At least one of --synthetic and --meshes is needed. A mesh that cannot be read (a
 folder or a broken link named like one too), is not pure-quad, has no faces, has a
@@ -171,6 +174,7 @@ pub fn run(argv: &[String]) -> Result<()> {
             "--seed",
             "--continue-rank",
             "--per-point",
+            "--far",
             "--coarsen",
             "--stretch",
             "--min-aspect",
@@ -221,6 +225,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         crate::cmd_candidates::MAX_PER_POINT,
         "more keeps every candidate anyway",
     )?;
+    crate::cmd_candidates::parse_far(&args, CMD, &mut cand_cfg)?;
     let coarsen = copy_values(&args, CMD, "--coarsen", |f| {
         if f > 0.0 && f < 1.0 {
             Ok(())

@@ -43,6 +43,9 @@ OPTIONS:
     --continue-rank R     lattice continuation: candidates ranked below R (0 to 1000)
                           propose the quads across their sides, snapped to the
                           nearest points (0 turns it off) [2]
+    --far F               far completion: each point also keeps its F best quads
+                          with a corner beyond its k nearest (anisotropic faces),
+                          0 to 64; the shipped weights were trained with 0 [0]
     --max-floater-faces N remove open components of at most N faces after insertion
                           (floaters; 0 keeps them) [4]
     --rescue-min-prob P   at holes, candidates scored under the threshold but at least P
@@ -100,6 +103,7 @@ const SPEC: Spec = Spec {
         "--k",
         "--per-point",
         "--continue-rank",
+        "--far",
         "--max-floater-faces",
         "--rescue-min-prob",
         "--rescue-lone",
@@ -179,6 +183,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         1000,
         "a rank among a point's candidates",
     )? as u16;
+    crate::cmd_candidates::parse_far(&a, cmd, &mut cfg.candidates)?;
     let pp = &mut cfg.postprocess;
     pp.max_floater_faces = a.parsed(cmd, "--max-floater-faces", pp.max_floater_faces)?;
     pp.rescue.min_prob =
@@ -436,6 +441,9 @@ fn off_default_candidates(c: &point2quad::pipeline::candidates::CandidateConfig)
     }
     if c.per_point != d.per_point {
         off.push(format!("--per-point {} (default {})", c.per_point, d.per_point));
+    }
+    if c.far_per_point != d.far_per_point {
+        off.push(format!("--far {} (default {})", c.far_per_point, d.far_per_point));
     }
     if off.is_empty() {
         return String::new();

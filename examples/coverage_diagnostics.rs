@@ -12,6 +12,8 @@
 //! [DM=name] cargo run --release --example coverage_diagnostics -- normals
 //! [DM=name] cargo run --release --example coverage_diagnostics -- seams
 //! [DM=name] cargo run --release --example coverage_diagnostics -- agreement
+//! [DFP=4] cargo run --release --example coverage_diagnostics -- permesh
+//! PC=1 PT=0.8 FK=64 PB=0 PK=8 cargo run --release --example coverage_diagnostics -- pgram
 //! ```
 //!
 //! `sweep` reads CandidateConfig overrides from DK, DPP, DR, DS, DWI1, DWI, DWL, DWS,
@@ -217,9 +219,9 @@ fn per_mesh() {
     println!("TOTAL {} | {} ({}) | {} ({})", tot[0], tot[1], tot[2], tot[3], tot[4]);
 }
 
-/// Prototype: parallelogram completion from a near neighbour a and a direction-diverse b.
+/// Prototype of the far completion (the module header's `pgram`): parallelogram
+/// completion from a near neighbour a and a direction-diverse b, x among b's nearest.
 fn pgram() {
-    use point2quad::spatial::kdtree::KdTree;
     let files = mesh_files("train").unwrap();
     let cfg = cfg_from_env();
     let ka = envf("PA", 8.0) as usize;
@@ -243,7 +245,6 @@ fn pgram() {
             let frame = point2quad::pipeline::frame::Frame::fit(&pts).unwrap();
             let local = frame.to_local_all(&pts);
             let n = local.len();
-            let tree = KdTree::build(&local);
             let knn = knn_table(&local, kf);
             let mut have: HashSet<[u32; 4]> = c.quads.iter().map(key).collect();
             let main_keys = have.clone();
@@ -337,7 +338,7 @@ fn pgram() {
                         }
                         let lmin = len.iter().copied().fold(f32::INFINITY, f32::min);
                         let lmax = len.iter().copied().fold(0.0, f32::max);
-                        if !(lmin > rmin * lmax) {
+                        if lmin.is_nan() || lmin <= rmin * lmax {
                             continue;
                         }
                         let mut cn = [[0f32; 3]; 4];
@@ -346,7 +347,7 @@ fn pgram() {
                             let cc = crs(ev[(s + 3) % 4], ev[s]);
                             let cl = nrm(cc);
                             let sine = cl / (len[(s + 3) % 4] * len[s]);
-                            if !(sine >= cfg.min_sine) {
+                            if sine.is_nan() || sine < cfg.min_sine {
                                 okq = false;
                                 break;
                             }
@@ -383,7 +384,7 @@ fn pgram() {
                     }
                 }
                 found.sort_by(|x, y| x.0.total_cmp(&y.0));
-                if envf("PD", -1.0) as usize == i {
+                if envf("PD", -1.0) == i as f64 {
                     let gt: HashSet<[u32; 4]> = mesh.quads.iter().map(key).collect();
                     for (r, (sc, q)) in found.iter().enumerate() {
                         if r < 15 || gt.contains(&key(q)) {
@@ -495,7 +496,9 @@ fn pgram() {
                                                 for s in 0..4 {
                                                     let cc = crs(ev[(s + 3) % 4], ev[s]);
                                                     let cl = nrm(cc);
-                                                    if !(cl / (len[(s + 3) % 4] * len[s]) >= cfg.min_sine) {
+                                                    if (cl / (len[(s + 3) % 4] * len[s])).is_nan()
+                                                        || cl / (len[(s + 3) % 4] * len[s]) < cfg.min_sine
+                                                    {
                                                         okq = false;
                                                     }
                                                     cn[s] = [cc[0] / cl, cc[1] / cl, cc[2] / cl];

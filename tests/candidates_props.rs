@@ -246,3 +246,103 @@ fn bad_clouds_are_errors_not_panics() {
     assert_eq!(c.quads.len(), 1);
     assert_eq!(key(&c.quads[0]), [0, 1, 2, 3]);
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// Far completion (session 29) only adds: every candidate of the run without it is
+    /// there with the same rank, score, inside count and proposers; each added one has
+    /// rank `per_point` and one proposer, a new vertex set of distinct points, is convex
+    /// and counter-clockwise about a corner's normal, and passes the sine and edge-ratio
+    /// filters; at most `far_per_point` are added per point; and the candidate set does
+    /// not depend on the order of the input points. The sheets are stretched up to 8:1
+    /// across their rows, so that cells reach beyond the 20 nearest.
+    #[test]
+    fn far_completion_only_adds_valid_quads_in_any_input_order(
+        cloud in wavy_strategy(),
+        stretch in 1.0f64..8.0,
+        far in 1usize..6,
+        seed in any::<u64>(),
+    ) {
+        let cloud: Vec<[f64; 3]> = cloud.iter().map(|p| [p[0], p[1] * stretch, p[2]]).collect();
+        let pts = to_f32(&cloud);
+        let base = CandidateConfig::default();
+        let cfg = CandidateConfig { far_per_point: far, ..base.clone() };
+        let (c0, c1) = (generate(&pts, &base).unwrap(), generate(&pts, &cfg).unwrap());
+        let at: std::collections::HashMap<[u32; 4], usize> =
+            c1.quads.iter().enumerate().map(|(i, q)| (*q, i)).collect();
+        for (i, q) in c0.quads.iter().enumerate() {
+            let j = *at.get(q).ok_or_else(|| TestCaseError::fail(format!("{q:?} lost")))?;
+            prop_assert_eq!((c0.rank[i], c0.score[i].to_bits(), c0.inside[i], c0.proposers[i]),
+                (c1.rank[j], c1.score[j].to_bits(), c1.inside[j], c1.proposers[j]));
+        }
+        let mut keys: Vec<[u32; 4]> = c1.quads.iter().map(key).collect();
+        keys.sort_unstable();
+        let n_keys = keys.len();
+        keys.dedup();
+        prop_assert_eq!(n_keys, keys.len(), "duplicate vertex sets");
+        let c0_set: std::collections::HashSet<[u32; 4]> = c0.quads.iter().copied().collect();
+        let added: Vec<usize> = (0..c1.len()).filter(|&j| !c0_set.contains(&c1.quads[j])).collect();
+        prop_assert!(added.len() <= far * pts.len());
+        for &j in &added {
+            let q = c1.quads[j];
+            prop_assert_eq!((c1.rank[j] as usize, c1.proposers[j]), (cfg.per_point, 1));
+            prop_assert!(key(&q).windows(2).all(|w| w[0] != w[1]), "repeated index in {:?}", q);
+            let p = q.map(|v| f64p(pts[v as usize]));
+            let fn_ = normalize(cross(sub(p[2], p[0]), sub(p[3], p[1]))).unwrap();
+            let lens: Vec<f64> = (0..4).map(|i| norm(sub(p[(i + 1) % 4], p[i]))).collect();
+            let (lmin, lmax) = lens.iter().fold((f64::MAX, 0.0f64), |(a, b), &l| (a.min(l), b.max(l)));
+            prop_assert!(lmin >= cfg.min_edge_ratio as f64 * lmax * (1.0 - 1e-5));
+            for i in 0..4 {
+                let ci = cross(sub(p[i], p[(i + 3) % 4]), sub(p[(i + 1) % 4], p[i]));
+                prop_assert!(dot(ci, fn_) > 0.0, "corner {} of {:?} not convex", i, q);
+                prop_assert!(norm(ci) / (lens[i] * lens[(i + 3) % 4]) >= cfg.min_sine as f64 - 1e-5);
+            }
+            prop_assert!((0..4).any(|i| dot(f64p(c1.normals[q[i] as usize]), fn_) > 0.0),
+                "{:?} is clockwise about every corner's normal", q);
+        }
+        let mut perm: Vec<usize> = (0..pts.len()).collect();
+        point2quad::rng::Rng::new(seed).shuffle(&mut perm);
+        let shuffled: Vec<[f32; 3]> = perm.iter().map(|&i| pts[i]).collect();
+        let cs = generate(&shuffled, &cfg).unwrap();
+        let mut a: Vec<[u32; 4]> = c1.quads.clone();
+        let mut b: Vec<[u32; 4]> =
+            cs.quads.iter().map(|q| cyclic_canonical(q.map(|j| perm[j as usize] as u32))).collect();
+        a.sort_unstable();
+        b.sort_unstable();
+        prop_assert_eq!(a, b);
+    }
+}
+
+/// On a jittered lattice of 1 × 9.5 cells a point's 20 nearest are its own row and the
+/// two points straight across it (away from the rows' ends), so no corner of such a cell
+/// has the other three among them: the proposal (without the lattice continuation, which would find them from
+/// the few cells near the rows' ends) finds few cells, and the far completion
+/// (session 29) every one.
+#[test]
+fn far_completion_reaches_cells_beyond_the_k_nearest() {
+    let (nx, ny) = (60usize, 12usize);
+    let mut rng = point2quad::rng::Rng::new(5);
+    let pts: Vec<[f32; 3]> = (0..nx * ny)
+        .map(|v| {
+            let (x, y) = ((v % nx) as f32, (v / nx) as f32);
+            [x + 0.04 * (rng.f32() - 0.5), 9.5 * y + 0.04 * (rng.f32() - 0.5), 0.001 * (rng.f32() - 0.5)]
+        })
+        .collect();
+    let cells: Vec<[u32; 4]> = (0..ny - 1)
+        .flat_map(|y| (0..nx - 1).map(move |x| (y * nx + x) as u32))
+        .map(|v| key(&[v, v + 1, v + nx as u32 + 1, v + nx as u32]))
+        .collect();
+    let share = |cfg: &CandidateConfig| {
+        let have: std::collections::HashSet<[u32; 4]> =
+            generate(&pts, cfg).unwrap().quads.iter().map(key).collect();
+        cells.iter().filter(|c| have.contains(*c)).count() as f64 / cells.len() as f64
+    };
+    let base = CandidateConfig { continue_rank: 0, ..CandidateConfig::default() };
+    let off = share(&base);
+    let on = share(&CandidateConfig { far_per_point: 4, ..base.clone() });
+    assert!(
+        off < 0.5 && on == 1.0,
+        "cells among the candidates: {off:.3} without, {on:.3} with far completion"
+    );
+}

@@ -75,6 +75,13 @@ fn work_sizing_options_are_bounded() {
             huge,
         ),
         (vec!["reconstruct", c, "-o", &mesh, "--k", "65"], "--k must be between 3 and 64", "65"),
+        (vec!["candidates", c, "-o", &cand, "--far", "65"], "--far must be between 0 and 64", "65"),
+        (vec!["reconstruct", c, "-o", &mesh, "--far", huge], "--far must be between 0 and 64", huge),
+        (
+            vec!["dataset", "--out", &ds, "--synthetic", "1", "--far", "65"],
+            "--far must be between 0 and 64",
+            "65",
+        ),
         (
             vec!["reconstruct", c, "-o", &mesh, "--per-point", "0"],
             "--per-point must be between 1 and 1024",
@@ -185,6 +192,35 @@ fn continuation_adds_candidates_from_the_cli() {
     let (off, on) = (lines("0"), lines("1"));
     assert!(off.is_subset(&on), "continuation dropped candidates");
     assert!(on.len() > off.len(), "nothing added: {} vs {}", on.len(), off.len());
+}
+
+/// `--far` (session 29) adds candidates and keeps every one found without it, on a
+/// jittered lattice of 1 × 9.5 cells, most of which lie beyond the 20 nearest.
+#[test]
+fn far_completion_adds_candidates_from_the_cli() {
+    let dir = Scratch::new("cli_far");
+    let mut rng = point2quad::rng::Rng::new(5);
+    let mut text = String::new();
+    for y in 0..12 {
+        for x in 0..60 {
+            let j = |r: &mut point2quad::rng::Rng| 0.04 * (r.f64() - 0.5);
+            text += &format!("{} {} {}\n", x as f64 + j(&mut rng), 9.5 * y as f64 + j(&mut rng), 0.0);
+        }
+    }
+    let c = &dir.write("rows.xyz", text.as_bytes());
+    let lines = |far: &str| -> std::collections::BTreeSet<String> {
+        let cand = dir.p(&format!("c{far}.txt"));
+        let out = p2q(&["candidates", c, "-o", &cand, "--continue-rank", "0", "--far", far]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        std::fs::read_to_string(&cand)
+            .expect("test: candidates written")
+            .lines()
+            .map(str::to_string)
+            .collect()
+    };
+    let (off, on) = (lines("0"), lines("4"));
+    assert!(off.is_subset(&on), "far completion dropped candidates");
+    assert!(on.len() > off.len() + 100, "too little added: {} vs {}", on.len(), off.len());
 }
 
 /// `dataset --per-point` (session 27) sizes the samples' candidate budget as

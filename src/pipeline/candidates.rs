@@ -1236,7 +1236,7 @@ fn diverse_neighbours(points: &[[f32; 3]], far: &KnnTable, i: usize, out: &mut V
         }
         let d = sub(points[j as usize], p);
         let l = norm(d);
-        if !(l > 0.0) {
+        if l.is_nan() || l <= 0.0 {
             continue;
         }
         let t = [d[0] / l, d[1] / l, d[2] / l];
@@ -1245,6 +1245,9 @@ fn diverse_neighbours(points: &[[f32; 3]], far: &KnnTable, i: usize, out: &mut V
         }
     }
 }
+
+/// One far quad of one point: (vertex set, canonical cyclic quad, score, inside count).
+type FarEntry = ([u32; 4], [u32; 4], f32, u16);
 
 /// Far completion (not in the paper; session 29): quads with a corner beyond the
 /// proposer's `k` nearest, which the proposal cannot see (anisotropic faces whose long
@@ -1267,10 +1270,10 @@ fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, 
     let far = knn_table(points, cfg.far_k);
     let have: std::collections::HashSet<[u32; 4]> = quads.iter().map(vertex_set).collect();
     const CHUNK: usize = 64;
-    let chunks: Vec<Vec<([u32; 4], [u32; 4], f32, u16)>> = crate::par::map(n.div_ceil(CHUNK), |ch| {
+    let chunks: Vec<Vec<FarEntry>> = crate::par::map(n.div_ceil(CHUNK), |ch| {
         let mut kept = Vec::new();
         let mut div = Vec::new();
-        let mut found: Vec<([u32; 4], [u32; 4], f32, u16)> = Vec::new();
+        let mut found: Vec<FarEntry> = Vec::new();
         for i in ch * CHUNK..((ch + 1) * CHUNK).min(n) {
             let p = points[i];
             diverse_neighbours(points, &far, i, &mut div);
@@ -1279,7 +1282,7 @@ fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, 
             for &a in &near {
                 let ea = sub(points[a as usize], p);
                 let la = norm(ea);
-                if !(la > 0.0) {
+                if la.is_nan() || la <= 0.0 {
                     continue;
                 }
                 for &(b, ub) in &div {
@@ -1296,7 +1299,7 @@ fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, 
                         let px = points[x as usize];
                         let (exb, exa) = (sub(px, pb), sub(px, pa));
                         let (lxb, lxa) = (norm(exb), norm(exa));
-                        if !(lxb > 0.0 && lxa > 0.0) {
+                        if lxb.is_nan() || lxa.is_nan() || lxb <= 0.0 || lxa <= 0.0 {
                             continue;
                         }
                         let c = (dot(exb, ua) / lxb).min(dot(exa, ub) / lxa);
@@ -1318,7 +1321,7 @@ fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, 
                         }
                     }
                     let Some((c, x)) = best else { continue };
-                    if !(c >= FAR_MIN_COS) {
+                    if c.is_nan() || c < FAR_MIN_COS {
                         continue;
                     }
                     let q = [i as u32, a, x, b];
@@ -1341,7 +1344,7 @@ fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, 
         }
         kept
     });
-    let mut all: Vec<([u32; 4], [u32; 4], f32, u16)> = chunks.into_iter().flatten().collect();
+    let mut all: Vec<FarEntry> = chunks.into_iter().flatten().collect();
     all.sort_unstable_by(|x, y| x.0.cmp(&y.0).then(x.2.total_cmp(&y.2)).then(x.1.cmp(&y.1)));
     all.dedup_by(|later, first| later.0 == first.0);
     all.into_iter().map(|(_, q, sc, ins)| (q, sc, ins)).collect()
@@ -1650,6 +1653,135 @@ mod tests {
             }
             assert!(checked > pts.len(), "too few quads checked: {checked}");
         }
+    }
+
+    /// The far completion of its definition, written plainly: neighbours by sorting
+    /// every other point by distance (ties by coordinates), the diverse ones, near
+    /// corners and fourth corners from those lists, both turns through
+    /// `evaluate_quad`, each point's list sorted whole and cut at `far_per_point`, and a
+    /// map from vertex set to the best entry.
+    fn far_reference(
+        points: &[[f32; 3]],
+        c: &Candidates,
+        cfg: &CandidateConfig,
+        existing: &[[u32; 4]],
+    ) -> Vec<([u32; 4], f32, u16)> {
+        use crate::spatial::kdtree::dist_sq;
+        let n = points.len();
+        let cloud = Cloud { points, normals: &c.normals, spacing: &c.spacing, knn: &c.knn, cfg };
+        let coords = |a: u32, b: u32| {
+            let (u, v) = (points[a as usize], points[b as usize]);
+            u[0].total_cmp(&v[0]).then(u[1].total_cmp(&v[1])).then(u[2].total_cmp(&v[2]))
+        };
+        let sorted = |i: usize| -> Vec<u32> {
+            let mut o: Vec<u32> = (0..n as u32).filter(|&j| j as usize != i).collect();
+            o.sort_by(|&a, &b| {
+                dist_sq(points[i], points[a as usize])
+                    .total_cmp(&dist_sq(points[i], points[b as usize]))
+                    .then_with(|| coords(a, b))
+            });
+            o
+        };
+        let have: std::collections::HashSet<[u32; 4]> = existing.iter().map(vertex_set).collect();
+        let mut best: std::collections::HashMap<[u32; 4], ([u32; 4], f32, u16)> = Default::default();
+        for i in 0..n {
+            let o = sorted(i);
+            let p = points[i];
+            let mut div: Vec<(u32, [f32; 3])> = Vec::new();
+            for &j in o.iter().take(cfg.far_k) {
+                let d = sub(points[j as usize], p);
+                let l = norm(d);
+                let t = [d[0] / l, d[1] / l, d[2] / l];
+                if div.len() < 12 && l > 0.0 && div.iter().all(|(_, u)| dot(*u, t) <= 0.866_025_4) {
+                    div.push((j, t));
+                }
+            }
+            let mut found: Vec<([u32; 4], [u32; 4], f32, u16)> = Vec::new();
+            for &a in o.iter().take(8) {
+                for &(b, ub) in &div {
+                    let ea = sub(points[a as usize], p);
+                    let la = norm(ea);
+                    let ua = [ea[0] / la, ea[1] / la, ea[2] / la];
+                    let (pa, pb) = (points[a as usize], points[b as usize]);
+                    let mut xs: Vec<(f32, u32)> = sorted(b as usize)
+                        .into_iter()
+                        .take(8)
+                        .filter(|&x| x as usize != i && x != a && b != a)
+                        .map(|x| {
+                            let px = points[x as usize];
+                            let (exb, exa) = (sub(px, pb), sub(px, pa));
+                            ((dot(exb, ua) / norm(exb)).min(dot(exa, ub) / norm(exa)), x)
+                        })
+                        .collect();
+                    xs.sort_by(|u, v| v.0.total_cmp(&u.0).then_with(|| coords(u.1, v.1)));
+                    let Some(&(cos, x)) = xs.first() else { continue };
+                    let q = [i as u32, a, x, b];
+                    if cos.is_nan() || cos < 0.8 || have.contains(&vertex_set(&q)) {
+                        continue;
+                    }
+                    if found.iter().any(|f| f.0 == vertex_set(&q)) {
+                        continue;
+                    }
+                    let mut turns: Vec<([u32; 4], f32, u16)> = [q, [i as u32, b, x, a]]
+                        .into_iter()
+                        .filter_map(|r| cloud.evaluate_quad(r).map(|(sc, ins)| (r, sc, ins)))
+                        .collect();
+                    turns.sort_by(|u, v| u.1.total_cmp(&v.1));
+                    if let Some(&(r, sc, ins)) = turns.first() {
+                        found.push((vertex_set(&q), canonical(r), sc, ins));
+                    }
+                }
+            }
+            found.sort_by(|u, v| u.2.total_cmp(&v.2).then_with(|| coord_order(points, &u.1, &v.1)));
+            for &(k, q, sc, ins) in found.iter().take(cfg.far_per_point) {
+                let e = best.entry(k).or_insert((q, sc, ins));
+                if sc < e.1 || (sc == e.1 && q < e.0) {
+                    *e = (q, sc, ins);
+                }
+            }
+        }
+        let mut out: Vec<([u32; 4], [u32; 4], f32, u16)> =
+            best.into_iter().map(|(k, (q, sc, ins))| (k, q, sc, ins)).collect();
+        out.sort_by_key(|e| e.0);
+        out.into_iter().map(|(_, q, sc, ins)| (q, sc, ins)).collect()
+    }
+
+    /// `far_completion` against [`far_reference`], bit for bit (scores compared as bits),
+    /// on jittered lattices stretched 1:1 to 9.5:1 and a jittered wavy sheet, for budgets
+    /// of 1, 3 and 8 and both neighbour scans; it must also find something to add.
+    #[test]
+    fn far_completion_matches_its_plain_definition() {
+        let mut added = 0;
+        for (stretch, far_k) in [(1.0f32, 64usize), (4.0, 64), (9.5, 64), (9.5, 24), (2.5, 40)] {
+            let mut pts: Vec<[f32; 3]> =
+                grid(11, 7, 0.15).into_iter().map(|p| [p[0], p[1] * stretch, p[2]]).collect();
+            if stretch == 2.5 {
+                // A wavy sheet: a curved surface, corner normals that disagree.
+                for p in &mut pts {
+                    p[2] = 1.5 * (0.5 * p[0]).sin();
+                }
+            }
+            for per in [1usize, 3, 8] {
+                let base = CandidateConfig { far_k, ..CandidateConfig::default() };
+                let cfg = CandidateConfig { far_per_point: per, ..base.clone() };
+                let c0 = generate(&pts, &base).unwrap();
+                let cloud = Cloud {
+                    points: &pts,
+                    normals: &c0.normals,
+                    spacing: &c0.spacing,
+                    knn: &c0.knn,
+                    cfg: &cfg,
+                };
+                let got = far_completion(&cloud, &c0.quads);
+                let want = far_reference(&pts, &c0, &cfg, &c0.quads);
+                let bits = |v: &[([u32; 4], f32, u16)]| -> Vec<([u32; 4], u32, u16)> {
+                    v.iter().map(|&(q, sc, ins)| (q, sc.to_bits(), ins)).collect()
+                };
+                assert_eq!(bits(&got), bits(&want), "stretch {stretch}, far_k {far_k}, per point {per}");
+                added += got.len();
+            }
+        }
+        assert!(added > 50, "the far completion added only {added} quads over all cases");
     }
 
     /// On a jittered lattice with a budget of one candidate per point, the ranking

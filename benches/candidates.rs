@@ -7,7 +7,8 @@
 //! far less than wall time. Threads follow `RAYON_NUM_THREADS`.
 //!
 //! With `CANDIDATES_BENCH_XYZ=PATH` the cloud is also written there (to time other builds of
-//! `point2quad candidates` on exactly the same input).
+//! `point2quad candidates` on exactly the same input). `CANDIDATES_BENCH_FAR=F` turns on
+//! the far completion with F per point (`--far F`; session 29).
 
 use point2quad::mesh::shapes;
 use point2quad::pipeline::candidates::{generate, CandidateConfig};
@@ -34,7 +35,9 @@ fn main() {
     }
     let frame = Frame::fit(&cloud).expect("bench: frame");
     let points = frame.to_local_all(&cloud);
-    let cfg = CandidateConfig::default();
+    let far =
+        std::env::var("CANDIDATES_BENCH_FAR").ok().map(|v| v.parse().expect("bench: CANDIDATES_BENCH_FAR"));
+    let cfg = CandidateConfig { far_per_point: far.unwrap_or(0), ..CandidateConfig::default() };
 
     let warm = generate(&points, &cfg).expect("bench: candidates");
     let cpu0 = cpu_ms();

@@ -1246,6 +1246,29 @@ fn diverse_neighbours(points: &[[f32; 3]], far: &KnnTable, i: usize, out: &mut V
     }
 }
 
+/// A conservative early test of the corner-independent filters of
+/// [`Cloud::evaluate_from`] (edge ratio, corner sines) on the cyclic quad `q`: false
+/// only where every corner would refuse it. The margins (0.1% of the ratio bound, 0.001
+/// of sine) are far above the f32 rounding that separates one corner's view of the
+/// quad from another's, so the far completion's output is the same with or without it
+/// (`far_completion_matches_its_plain_definition` checks against the plain definition).
+fn far_shape_may_pass(points: &[[f32; 3]], q: [u32; 4], cfg: &CandidateConfig) -> bool {
+    let p = q.map(|v| points[v as usize]);
+    let e: [[f32; 3]; 4] = std::array::from_fn(|s| sub(p[(s + 1) % 4], p[s]));
+    let len = e.map(norm);
+    let lmin = len.iter().copied().fold(f32::INFINITY, f32::min);
+    let lmax = len.iter().copied().fold(0.0f32, f32::max);
+    if lmin < 0.999 * cfg.min_edge_ratio * lmax {
+        return false;
+    }
+    (0..4).all(|s| {
+        let prev = (s + 3) % 4;
+        let ll = len[prev] * len[s];
+        // NaN and degenerate corners are left to the full test.
+        !(ll > 0.0) || norm(cross(e[prev], e[s])) / ll >= cfg.min_sine - 1e-3
+    })
+}
+
 /// One far quad of one point: (vertex set, canonical cyclic quad, score, inside count).
 type FarEntry = ([u32; 4], [u32; 4], f32, u16);
 
@@ -1253,14 +1276,15 @@ type FarEntry = ([u32; 4], [u32; 4], f32, u16);
 /// proposer's `k` nearest, which the proposal cannot see (anisotropic faces whose long
 /// side spans more than 20 neighbours). For each point p and each pair of a near
 /// corner a (one of p's [`FAR_NEAR`] nearest) and a far corner b (one of p's
-/// [`diverse_neighbours`]), the fourth corner x is the point among b's [`FAR_NEAR`]
-/// nearest whose sides best parallel the quad's: the largest
-/// min(cos∠(x − b, a − p), cos∠(x − a, b − p)), at least [`FAR_MIN_COS`] (ties by
-/// coordinates). A quad [p, a, x, b] (either turn) whose vertex set is not yet a
-/// candidate must pass [`Cloud::evaluate_quad`] (the proposal's filters) and is ranked
-/// by its score; each point keeps its `far_per_point` best (ties by coordinates). A
-/// vertex set kept by several points keeps its best score. Returns the quads
-/// (canonical cyclic order) with score and inside count, sorted by vertex set.
+/// [`diverse_neighbours`] that is not among its `k` nearest), the fourth corner x is
+/// the point among b's [`FAR_NEAR`] nearest whose sides best parallel the quad's: the
+/// largest min(cos∠(x − b, a − p), cos∠(x − a, b − p)), at least [`FAR_MIN_COS`] (ties
+/// by coordinates). A quad [p, a, x, b] whose vertex set is not yet a candidate must
+/// pass, in one of its two turns, the proposal's filters with p as proposer
+/// ([`Cloud::evaluate_from`]) and is ranked by that score (the better turn's); each
+/// point keeps its `far_per_point` best (ties by coordinates). A vertex set kept by
+/// several points keeps its best score. Returns the quads (canonical cyclic order) with
+/// score and inside count, sorted by vertex set.
 fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, u16)> {
     let (points, cfg) = (cloud.points, cloud.cfg);
     let n = points.len();
@@ -1268,16 +1292,38 @@ fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, 
         return Vec::new();
     }
     let far = knn_table(points, cfg.far_k);
-    let have: std::collections::HashSet<[u32; 4]> = quads.iter().map(vertex_set).collect();
+    // Vertex sets already among the candidates, sorted for binary search.
+    let mut have: Vec<[u32; 4]> = quads.iter().map(vertex_set).collect();
+    have.sort_unstable();
+    let coords_lt = |x: u32, y: u32| {
+        let (u, v) = (points[x as usize], points[y as usize]);
+        u[0].total_cmp(&v[0]).then(u[1].total_cmp(&v[1])).then(u[2].total_cmp(&v[2])).is_lt()
+    };
     const CHUNK: usize = 64;
     let chunks: Vec<Vec<FarEntry>> = crate::par::map(n.div_ceil(CHUNK), |ch| {
         let mut kept = Vec::new();
         let mut div = Vec::new();
         let mut found: Vec<FarEntry> = Vec::new();
+        // Per far corner b: its near points x with x − b and |x − b|.
+        let mut fourth: Vec<Vec<(u32, [f32; 3], f32)>> = Vec::new();
         for i in ch * CHUNK..((ch + 1) * CHUNK).min(n) {
             let p = points[i];
             diverse_neighbours(points, &far, i, &mut div);
             let near: Vec<u32> = neighbours(cloud.knn, n, i, FAR_NEAR).collect();
+            // Far corners beyond the proposal's reach only.
+            let reach: Vec<u32> = neighbours(cloud.knn, n, i, cfg.k).collect();
+            div.retain(|(b, _)| !reach.contains(b));
+            fourth.resize_with(div.len(), Vec::new);
+            for (f, &(b, _)) in fourth.iter_mut().zip(&div) {
+                let pb = points[b as usize];
+                f.clear();
+                f.extend(neighbours(cloud.knn, n, b as usize, FAR_NEAR).filter(|&x| x as usize != i).map(
+                    |x| {
+                        let exb = sub(points[x as usize], pb);
+                        (x, exb, norm(exb))
+                    },
+                ));
+            }
             found.clear();
             for &a in &near {
                 let ea = sub(points[a as usize], p);
@@ -1285,36 +1331,26 @@ fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, 
                 if la.is_nan() || la <= 0.0 {
                     continue;
                 }
-                for &(b, ub) in &div {
+                let ua = [ea[0] / la, ea[1] / la, ea[2] / la];
+                let pa = points[a as usize];
+                for (&(b, ub), xs) in div.iter().zip(&fourth) {
                     if b == a {
                         continue;
                     }
-                    let ua = [ea[0] / la, ea[1] / la, ea[2] / la];
-                    let (pa, pb) = (points[a as usize], points[b as usize]);
                     let mut best: Option<(f32, u32)> = None;
-                    for x in neighbours(cloud.knn, n, b as usize, FAR_NEAR) {
-                        if x as usize == i || x == a {
+                    for &(x, exb, lxb) in xs {
+                        if x == a {
                             continue;
                         }
-                        let px = points[x as usize];
-                        let (exb, exa) = (sub(px, pb), sub(px, pa));
-                        let (lxb, lxa) = (norm(exb), norm(exa));
+                        let exa = sub(points[x as usize], pa);
+                        let lxa = norm(exa);
                         if lxb.is_nan() || lxa.is_nan() || lxb <= 0.0 || lxa <= 0.0 {
                             continue;
                         }
                         let c = (dot(exb, ua) / lxb).min(dot(exa, ub) / lxa);
                         let better = match best {
                             None => true,
-                            Some((bc, bx)) => {
-                                c > bc
-                                    || (c == bc && {
-                                        let (u, v) = (points[x as usize], points[bx as usize]);
-                                        u[0].total_cmp(&v[0])
-                                            .then(u[1].total_cmp(&v[1]))
-                                            .then(u[2].total_cmp(&v[2]))
-                                            .is_lt()
-                                    })
-                            }
+                            Some((bc, bx)) => c > bc || (c == bc && coords_lt(x, bx)),
                         };
                         if better {
                             best = Some((c, x));
@@ -1325,14 +1361,17 @@ fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, 
                         continue;
                     }
                     let q = [i as u32, a, x, b];
+                    if !far_shape_may_pass(points, q, cfg) {
+                        continue;
+                    }
                     let key = vertex_set(&q);
-                    if have.contains(&key) || found.iter().any(|f| f.0 == key) {
+                    if have.binary_search(&key).is_ok() || found.iter().any(|f| f.0 == key) {
                         continue;
                     }
                     let turn = [i as u32, b, x, a];
                     let best_turn = [q, turn]
                         .into_iter()
-                        .filter_map(|r| cloud.evaluate_quad(r).map(|(sc, ins)| (r, sc, ins)))
+                        .filter_map(|r| cloud.evaluate_from(r).map(|(sc, ins)| (r, sc, ins)))
                         .min_by(|x, y| x.1.total_cmp(&y.1));
                     if let Some((r, sc, ins)) = best_turn {
                         found.push((key, canonical(r), sc, ins));
@@ -1656,10 +1695,10 @@ mod tests {
     }
 
     /// The far completion of its definition, written plainly: neighbours by sorting
-    /// every other point by distance (ties by coordinates), the diverse ones, near
-    /// corners and fourth corners from those lists, both turns through
-    /// `evaluate_quad`, each point's list sorted whole and cut at `far_per_point`, and a
-    /// map from vertex set to the best entry.
+    /// every other point by distance (ties by coordinates), the diverse ones beyond the
+    /// `k` nearest, near corners and fourth corners from those lists, both turns through
+    /// `evaluate_from` with p as proposer, each point's list sorted whole and cut at
+    /// `far_per_point`, and a map from vertex set to the best entry.
     fn far_reference(
         points: &[[f32; 3]],
         c: &Candidates,
@@ -1696,6 +1735,7 @@ mod tests {
                     div.push((j, t));
                 }
             }
+            div.retain(|(b, _)| !o[..cfg.k.min(o.len())].contains(b));
             let mut found: Vec<([u32; 4], [u32; 4], f32, u16)> = Vec::new();
             for &a in o.iter().take(8) {
                 for &(b, ub) in &div {
@@ -1724,7 +1764,7 @@ mod tests {
                     }
                     let mut turns: Vec<([u32; 4], f32, u16)> = [q, [i as u32, b, x, a]]
                         .into_iter()
-                        .filter_map(|r| cloud.evaluate_quad(r).map(|(sc, ins)| (r, sc, ins)))
+                        .filter_map(|r| cloud.evaluate_from(r).map(|(sc, ins)| (r, sc, ins)))
                         .collect();
                     turns.sort_by(|u, v| u.1.total_cmp(&v.1));
                     if let Some(&(r, sc, ins)) = turns.first() {

@@ -1265,7 +1265,7 @@ fn far_shape_may_pass(points: &[[f32; 3]], q: [u32; 4], cfg: &CandidateConfig) -
         let prev = (s + 3) % 4;
         let ll = len[prev] * len[s];
         // NaN and degenerate corners are left to the full test.
-        !(ll > 0.0) || norm(cross(e[prev], e[s])) / ll >= cfg.min_sine - 1e-3
+        ll.is_nan() || ll <= 0.0 || norm(cross(e[prev], e[s])) / ll >= cfg.min_sine - 1e-3
     })
 }
 

@@ -195,7 +195,7 @@ fn continuation_adds_candidates_from_the_cli() {
 }
 
 /// `--far` (session 29) adds candidates and keeps every one found without it, on a
-/// jittered lattice of 1 × 9.5 cells, most of which lie beyond the 20 nearest.
+/// jittered lattice of 1 × 5 cells, most of which lie beyond the 8 nearest (`--k 8`).
 #[test]
 fn far_completion_adds_candidates_from_the_cli() {
     let dir = Scratch::new("cli_far");
@@ -204,13 +204,13 @@ fn far_completion_adds_candidates_from_the_cli() {
     for y in 0..12 {
         for x in 0..60 {
             let j = |r: &mut point2quad::rng::Rng| 0.04 * (r.f64() - 0.5);
-            text += &format!("{} {} {}\n", x as f64 + j(&mut rng), 9.5 * y as f64 + j(&mut rng), 0.0);
+            text += &format!("{} {} {}\n", x as f64 + j(&mut rng), 5.0 * y as f64 + j(&mut rng), 0.0);
         }
     }
     let c = &dir.write("rows.xyz", text.as_bytes());
     let lines = |far: &str| -> std::collections::BTreeSet<String> {
         let cand = dir.p(&format!("c{far}.txt"));
-        let out = p2q(&["candidates", c, "-o", &cand, "--continue-rank", "0", "--far", far]);
+        let out = p2q(&["candidates", c, "-o", &cand, "--k", "8", "--continue-rank", "0", "--far", far]);
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
         std::fs::read_to_string(&cand)
             .expect("test: candidates written")

@@ -351,3 +351,35 @@ fn far_completion_reaches_cells_beyond_the_k_nearest() {
         "cells among the candidates: {off:.3} without, {on:.3} with far completion"
     );
 }
+
+/// The far completion on degenerate clouds an embedder may pass straight to the
+/// library (no input hygiene): every point the same, every point twice, a line, a
+/// plane grid with a far outlier, two distant clusters. No panic; what it returns
+/// has four distinct corners and no repeated vertex set.
+#[test]
+fn far_completion_on_degenerate_clouds() {
+    let grid: Vec<[f32; 3]> = (0..64).map(|v| [(v % 8) as f32, (v / 8) as f32 * 3.0, 0.0]).collect();
+    let twice: Vec<[f32; 3]> = grid.iter().flat_map(|&p| [p, p]).collect();
+    let mut outlier = grid.clone();
+    outlier.push([1e4, -3e4, 2e4]);
+    let clusters: Vec<[f32; 3]> = (0..40)
+        .map(|v| [(v % 5) as f32 * 0.01 + if v < 20 { 0.0 } else { 100.0 }, (v / 5 % 4) as f32 * 0.01, 0.0])
+        .collect();
+    let clouds: Vec<(&str, Vec<[f32; 3]>)> = vec![
+        ("identical", vec![[0.5, 0.5, 0.5]; 12]),
+        ("twice", twice),
+        ("line", (0..30).map(|v| [v as f32, 2.0 * v as f32, 0.0]).collect()),
+        ("outlier", outlier),
+        ("clusters", clusters),
+    ];
+    for (name, pts) in clouds {
+        let cfg = CandidateConfig { far_per_point: 8, ..CandidateConfig::default() };
+        let c = generate(&pts, &cfg).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let mut keys: Vec<[u32; 4]> = c.quads.iter().map(key).collect();
+        assert!(keys.iter().all(|k| k.windows(2).all(|w| w[0] != w[1])), "{name}: a repeated corner");
+        keys.sort_unstable();
+        let n = keys.len();
+        keys.dedup();
+        assert_eq!(n, keys.len(), "{name}: a repeated vertex set");
+    }
+}

@@ -88,6 +88,18 @@ proptest! {
         prop_assert!(m.vertices[pts.len()..].iter().all(|v| v.iter().all(|c| c.is_finite())));
     }
 
+    /// With the far completion in the candidates (`--far`, session 29; off by default)
+    /// the output is just as valid.
+    #[test]
+    fn output_with_far_completion_is_valid(kind in 0u8..4, seed in 0u64..1000, far in 1usize..9) {
+        let pts = cloud(kind, seed);
+        let mut cfg = ReconstructConfig::default();
+        cfg.candidates.far_per_point = far;
+        let m = reconstruct(&pts, model(), &cfg).expect("reconstruct");
+        assert_valid(&m);
+        assert_prefix(&m, &pts);
+    }
+
     /// A power-of-two scale is exact in floating point: the centroid, the radius and
     /// `(p − c) / s` all scale exactly, so the local frame, hence every later stage, is
     /// bit-identical and the faces must be equal (not just close).

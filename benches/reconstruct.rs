@@ -12,6 +12,8 @@
 //! a note goes to stderr and the line is left out). The peak covers the whole process: the cloud, the model and the largest run.
 //! The per-stage medians of `reconstruct_with_report`'s timings go to stderr (they are not
 //! `bench` lines: scripts read only the two names above). Threads follow `RAYON_NUM_THREADS`.
+//! `RECONSTRUCT_BENCH_FAR=F` turns on the far completion in the candidates (`--far F`;
+//! session 29) with the same weights, to time it.
 
 use point2quad::mesh::shapes;
 use point2quad::pipeline::model::Model;
@@ -37,7 +39,10 @@ fn main() {
     cloud.extend(noise_points(&mesh, &NoiseConfig::default(), &mut rng).expect("bench: noise points"));
     let model = Model::from_bytes(SHIPPED_WEIGHTS, Path::new("fixtures/point2quad-default.p2qm"))
         .expect("bench: shipped weights");
-    let cfg = ReconstructConfig::default();
+    let mut cfg = ReconstructConfig::default();
+    if let Ok(f) = std::env::var("RECONSTRUCT_BENCH_FAR") {
+        cfg.candidates.far_per_point = f.parse().expect("bench: RECONSTRUCT_BENCH_FAR");
+    }
 
     // Warm-up, and the account of what one run produces.
     let (warm, report) = reconstruct_with_report(&cloud, &model, &cfg).expect("bench: reconstruct");

@@ -3,11 +3,14 @@
 //! (and a 20-digit value) is a usage error (exit 2) naming the option, the bounds and the
 //! value, before any file is read or written.
 
+#[path = "common/candidates.rs"]
+mod cands_common;
 #[path = "common/scratch.rs"]
 mod scratch;
 
 use std::process::{Command, Output};
 
+use cands_common::rows_lattice;
 use scratch::Scratch;
 
 fn p2q(args: &[&str]) -> Output {
@@ -199,14 +202,8 @@ fn continuation_adds_candidates_from_the_cli() {
 #[test]
 fn far_completion_adds_candidates_from_the_cli() {
     let dir = Scratch::new("cli_far");
-    let mut rng = point2quad::rng::Rng::new(5);
-    let mut text = String::new();
-    for y in 0..12 {
-        for x in 0..60 {
-            let j = |r: &mut point2quad::rng::Rng| 0.04 * (r.f64() - 0.5);
-            text += &format!("{} {} {}\n", x as f64 + j(&mut rng), 5.0 * y as f64 + j(&mut rng), 0.0);
-        }
-    }
+    let text: String =
+        rows_lattice(60, 12, 5.0).iter().map(|p| format!("{} {} {}\n", p[0], p[1], p[2])).collect();
     let c = &dir.write("rows.xyz", text.as_bytes());
     let lines = |far: &str| -> std::collections::BTreeSet<String> {
         let cand = dir.p(&format!("c{far}.txt"));

@@ -1040,8 +1040,8 @@ pub const DEFAULT_INSIDE_PLANE_TOL: f32 = 0.3;
 /// The default edge margin of the inside test ([`CandidateConfig::inside_margin`]).
 pub const DEFAULT_INSIDE_MARGIN: f32 = 0.05;
 
-/// Largest neighbour count ([`CandidateConfig`]'s `k`, `normal_k`, `spacing_k`) that
-/// [`generate`] accepts: candidate enumeration grows with the cube of `k` (C(k, 3)
+/// Largest neighbour count ([`CandidateConfig`]'s `k`, `normal_k`, `spacing_k`, and the
+/// far completion's `far_k`) that [`generate`] accepts: candidate enumeration grows with the cube of `k` (C(k, 3)
 /// neighbour triples per point: 41,664 at 64), and `k` is otherwise only capped by the
 /// cloud size, so a stray 100000 turned a 10k-point cloud into hours of work and a
 /// 10^8-entry neighbour table. DESIGN §2 finds coverage saturated at k = 20.
@@ -1049,14 +1049,19 @@ pub const MAX_NEIGHBOURS: usize = 64;
 
 /// `InvalidInput` naming the first neighbour count above [`MAX_NEIGHBOURS`].
 pub fn check_neighbour_counts(cfg: &CandidateConfig) -> Result<()> {
-    for (name, k) in
-        [("k", cfg.k), ("normal_k", cfg.normal_k), ("spacing_k", cfg.spacing_k), ("far_k", cfg.far_k)]
-    {
+    for (name, k) in [("k", cfg.k), ("normal_k", cfg.normal_k), ("spacing_k", cfg.spacing_k)] {
         if k > MAX_NEIGHBOURS {
             return Err(Error::invalid(format!(
                 "candidate setting {name} = {k} is above {MAX_NEIGHBOURS} (work grows with the cube of k)"
             )));
         }
+    }
+    // Checked whether or not the far completion is on: a setting either way.
+    if cfg.far_k > MAX_NEIGHBOURS {
+        return Err(Error::invalid(format!(
+            "candidate setting far_k = {} is above {MAX_NEIGHBOURS} (a kNN table of far_k + 1 columns per point)",
+            cfg.far_k
+        )));
     }
     Ok(())
 }
@@ -1207,11 +1212,24 @@ const FAR_DIVERSE_COS: f32 = 0.866_025_4;
 /// (cosine, about 37°).
 const FAR_MIN_COS: f32 = 0.8;
 
-/// The direction-diverse neighbours of point `i`: of its `far_k` nearest, by distance
-/// (ties by coordinates, so the choice does not depend on the input order), each whose
-/// direction from `i` is more than 30° from the direction of every one taken before,
-/// at most [`FAR_DIRECTIONS`]. Exact duplicates of `i` are skipped.
-fn diverse_neighbours(points: &[[f32; 3]], far: &KnnTable, i: usize, out: &mut Vec<(u32, [f32; 3])>) {
+/// Lexicographic order of two points' coordinates: the tie-break that does not depend
+/// on point indices.
+fn coord_cmp(a: [f32; 3], b: [f32; 3]) -> std::cmp::Ordering {
+    a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])).then(a[2].total_cmp(&b[2]))
+}
+
+/// The direction-diverse neighbours of point `i`: of its `far_k` nearest (its row of
+/// `far`, a kNN table, whose cut at `far_k` falls by index among equal distances, as
+/// every kNN row here does), by distance with ties by coordinates, each whose direction
+/// from `i` is more than 30° from the direction of every one taken before, at most
+/// [`FAR_DIRECTIONS`]. Exact duplicates of `i` are skipped.
+fn diverse_neighbours(
+    points: &[[f32; 3]],
+    far: &KnnTable,
+    far_k: usize,
+    i: usize,
+    out: &mut Vec<(u32, [f32; 3])>,
+) {
     let n = points.len();
     let p = points[i];
     let mut row: Vec<(f32, u32)> = {
@@ -1221,13 +1239,11 @@ fn diverse_neighbours(points: &[[f32; 3]], far: &KnnTable, i: usize, out: &mut V
             .zip(&far.dist_sq[i * w..(i + 1) * w])
             .filter(|(&j, _)| j as usize != i)
             .map(|(&j, &d)| (d, j))
+            .take(far_k)
             .collect()
     };
     row.sort_by(|x, y| {
-        x.0.total_cmp(&y.0).then_with(|| {
-            let (a, b) = (points[x.1 as usize], points[y.1 as usize]);
-            a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])).then(a[2].total_cmp(&b[2]))
-        })
+        x.0.total_cmp(&y.0).then_with(|| coord_cmp(points[x.1 as usize], points[y.1 as usize]))
     });
     out.clear();
     for (_, j) in row {
@@ -1246,27 +1262,18 @@ fn diverse_neighbours(points: &[[f32; 3]], far: &KnnTable, i: usize, out: &mut V
     }
 }
 
-/// A conservative early test of the corner-independent filters of
-/// [`Cloud::evaluate_from`] (edge ratio, corner sines) on the cyclic quad `q`: false
-/// only where every corner would refuse it. The margins (0.1% of the ratio bound, 0.001
-/// of sine) are far above the f32 rounding that separates one corner's view of the
-/// quad from another's, so the far completion's output is the same with or without it
-/// (`far_completion_matches_its_plain_definition` checks against the plain definition).
-fn far_shape_may_pass(points: &[[f32; 3]], q: [u32; 4], cfg: &CandidateConfig) -> bool {
-    let p = q.map(|v| points[v as usize]);
-    let e: [[f32; 3]; 4] = std::array::from_fn(|s| sub(p[(s + 1) % 4], p[s]));
-    let len = e.map(norm);
-    let lmin = len.iter().copied().fold(f32::INFINITY, f32::min);
-    let lmax = len.iter().copied().fold(0.0f32, f32::max);
-    if lmin < 0.999 * cfg.min_edge_ratio * lmax {
-        return false;
-    }
-    (0..4).all(|s| {
-        let prev = (s + 3) % 4;
-        let ll = len[prev] * len[s];
-        // NaN and degenerate corners are left to the full test.
-        ll.is_nan() || ll <= 0.0 || norm(cross(e[prev], e[s])) / ll >= cfg.min_sine - 1e-3
-    })
+/// Whether the cyclic quad `q` passes the edge-ratio and corner-sine filters of
+/// [`Cloud::evaluate_from`] with `q[0]` as proposer: the same [`quad_geom`] of the same
+/// proposer-relative corners, so the same verdict, bit for bit, and for the reversed
+/// turn too (its edges are the same vectors negated, its corners the same products).
+/// The far completion asks it before the full test, which also counts inside points.
+fn far_shape_passes(points: &[[f32; 3]], q: [u32; 4], cfg: &CandidateConfig) -> bool {
+    let p = points[q[0] as usize];
+    let g = quad_geom(q.map(|v| sub(points[v as usize], p)));
+    let lmin = g.len.iter().copied().fold(f32::INFINITY, f32::min);
+    let lmax = g.len.iter().copied().fold(0.0f32, f32::max);
+    !(lmin.is_nan() || lmin <= 0.0 || lmin < cfg.min_edge_ratio * lmax)
+        && g.sine.iter().all(|&s| s >= cfg.min_sine)
 }
 
 /// One far quad of one point: (vertex set, canonical cyclic quad, score, inside count).
@@ -1278,13 +1285,21 @@ type FarEntry = ([u32; 4], [u32; 4], f32, u16);
 /// corner a (one of p's [`FAR_NEAR`] nearest) and a far corner b (one of p's
 /// [`diverse_neighbours`] that is not among its `k` nearest), the fourth corner x is
 /// the point among b's [`FAR_NEAR`] nearest whose sides best parallel the quad's: the
-/// largest min(cos∠(x − b, a − p), cos∠(x − a, b − p)), at least [`FAR_MIN_COS`] (ties
-/// by coordinates). A quad [p, a, x, b] whose vertex set is not yet a candidate must
-/// pass, in one of its two turns, the proposal's filters with p as proposer
-/// ([`Cloud::evaluate_from`]) and is ranked by that score (the better turn's); each
-/// point keeps its `far_per_point` best (ties by coordinates). A vertex set kept by
-/// several points keeps its best score. Returns the quads (canonical cyclic order) with
-/// score and inside count, sorted by vertex set.
+/// largest min(cos∠(x − b, a − p), cos∠(x − a, b − p)), at least [`FAR_MIN_COS`], over
+/// those at a distance from both a and b. A quad [p, a, x, b] whose vertex set is not yet
+/// a candidate must pass, in one of its two turns, the proposal's filters with p as
+/// proposer ([`Cloud::evaluate_from`]) and is ranked by that score (the better turn's);
+/// a vertex set met twice keeps its better entry; each point keeps its `far_per_point`
+/// best. A vertex set kept by several points keeps its best score. Every choice among
+/// equals is by coordinates, except where a kNN row is cut (its 8, `k` or `far_k`
+/// nearest), which falls by index among equal distances, as in the proposal, and among
+/// quads whose corners have the same coordinates (duplicate points), which fall by the
+/// scan order (near corners by distance, then far corners in diverse order). The near
+/// lists come from the proposal's kNN table, `max(k, normal_k, spacing_k)` wide (20 by
+/// default): narrower than 8 leaves them shorter. Returns the quads (canonical cyclic
+/// order) with score and inside count, sorted by vertex set; [`generate`] adds them
+/// with rank `per_point` and one proposer, as the continuation's (the proposer count of
+/// such a quad is a convention: it stands beyond every point's ranked list).
 fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, u16)> {
     let (points, cfg) = (cloud.points, cloud.cfg);
     let n = points.len();
@@ -1295,10 +1310,6 @@ fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, 
     // Vertex sets already among the candidates, sorted for binary search.
     let mut have: Vec<[u32; 4]> = quads.iter().map(vertex_set).collect();
     have.sort_unstable();
-    let coords_lt = |x: u32, y: u32| {
-        let (u, v) = (points[x as usize], points[y as usize]);
-        u[0].total_cmp(&v[0]).then(u[1].total_cmp(&v[1])).then(u[2].total_cmp(&v[2])).is_lt()
-    };
     const CHUNK: usize = 64;
     let chunks: Vec<Vec<FarEntry>> = crate::par::map(n.div_ceil(CHUNK), |ch| {
         let mut kept = Vec::new();
@@ -1308,7 +1319,7 @@ fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, 
         let mut fourth: Vec<Vec<(u32, [f32; 3], f32)>> = Vec::new();
         for i in ch * CHUNK..((ch + 1) * CHUNK).min(n) {
             let p = points[i];
-            diverse_neighbours(points, &far, i, &mut div);
+            diverse_neighbours(points, &far, cfg.far_k, i, &mut div);
             let near: Vec<u32> = neighbours(cloud.knn, n, i, FAR_NEAR).collect();
             // Far corners beyond the proposal's reach only.
             let reach: Vec<u32> = neighbours(cloud.knn, n, i, cfg.k).collect();
@@ -1350,7 +1361,10 @@ fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, 
                         let c = (dot(exb, ua) / lxb).min(dot(exa, ub) / lxa);
                         let better = match best {
                             None => true,
-                            Some((bc, bx)) => c > bc || (c == bc && coords_lt(x, bx)),
+                            Some((bc, bx)) => {
+                                c > bc
+                                    || (c == bc && coord_cmp(points[x as usize], points[bx as usize]).is_lt())
+                            }
                         };
                         if better {
                             best = Some((c, x));
@@ -1361,20 +1375,27 @@ fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, 
                         continue;
                     }
                     let q = [i as u32, a, x, b];
-                    if !far_shape_may_pass(points, q, cfg) {
+                    if !far_shape_passes(points, q, cfg) {
                         continue;
                     }
                     let key = vertex_set(&q);
-                    if have.binary_search(&key).is_ok() || found.iter().any(|f| f.0 == key) {
+                    if have.binary_search(&key).is_ok() {
                         continue;
                     }
                     let turn = [i as u32, b, x, a];
                     let best_turn = [q, turn]
                         .into_iter()
-                        .filter_map(|r| cloud.evaluate_from(r).map(|(sc, ins)| (r, sc, ins)))
-                        .min_by(|x, y| x.1.total_cmp(&y.1));
-                    if let Some((r, sc, ins)) = best_turn {
-                        found.push((key, canonical(r), sc, ins));
+                        .filter_map(|r| cloud.evaluate_from(r).map(|(sc, ins)| (canonical(r), sc, ins)))
+                        .min_by(|x, y| x.1.total_cmp(&y.1).then_with(|| coord_order(points, &x.0, &y.0)));
+                    let Some((r, sc, ins)) = best_turn else { continue };
+                    // A vertex set met twice (two pairs, two cyclic orders) keeps its best.
+                    match found.iter_mut().find(|f| f.0 == key) {
+                        Some(f) => {
+                            if sc.total_cmp(&f.2).then_with(|| coord_order(points, &r, &f.1)).is_lt() {
+                                *f = (key, r, sc, ins);
+                            }
+                        }
+                        None => found.push((key, r, sc, ins)),
                     }
                 }
             }
@@ -1384,9 +1405,32 @@ fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, 
         kept
     });
     let mut all: Vec<FarEntry> = chunks.into_iter().flatten().collect();
-    all.sort_unstable_by(|x, y| x.0.cmp(&y.0).then(x.2.total_cmp(&y.2)).then(x.1.cmp(&y.1)));
+    all.sort_unstable_by(|x, y| {
+        // Last, the cyclic order: two turns of one vertex set scored alike (never met).
+        x.0.cmp(&y.0)
+            .then(x.2.total_cmp(&y.2))
+            .then_with(|| coord_order(points, &x.1, &y.1))
+            .then(x.1.cmp(&y.1))
+    });
     all.dedup_by(|later, first| later.0 == first.0);
     all.into_iter().map(|(_, q, sc, ins)| (q, sc, ins)).collect()
+}
+
+/// The per-candidate columns [`generate`] builds: quads, proposers, rank, score, inside.
+type Columns<'a> =
+    (&'a mut Vec<[u32; 4]>, &'a mut Vec<u8>, &'a mut Vec<u16>, &'a mut Vec<f32>, &'a mut Vec<u16>);
+
+/// Appends quads found after the proposal (the continuation's, the far completion's):
+/// rank `beyond` (past every budget) and one proposer each.
+fn append_beyond(added: Vec<([u32; 4], f32, u16)>, beyond: u16, cols: Columns<'_>) {
+    let (quads, proposers, rank, score, inside) = cols;
+    for (q, sc, ins) in added {
+        quads.push(q);
+        proposers.push(1);
+        rank.push(beyond);
+        score.push(sc);
+        inside.push(ins);
+    }
 }
 
 /// Generates the candidate quads of a cloud (in the normalised frame, though any
@@ -1394,7 +1438,7 @@ fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, 
 ///
 /// # Errors
 /// `InvalidInput` for fewer than 4 points or a non-finite coordinate (naming the
-/// point), and for a neighbour count (`k`, `normal_k`, `spacing_k`) above
+/// point), and for a neighbour count (`k`, `normal_k`, `spacing_k`, `far_k`) above
 /// [`MAX_NEIGHBOURS`]. Degenerate clouds (collinear, coplanar, duplicates) are not
 /// errors: coplanar is an open surface and gets candidates, collinear gets none.
 pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates> {
@@ -1462,24 +1506,14 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
         let cloud = Cloud { points, normals: &normals, spacing: &spacing, knn: &knn, cfg };
         // Beyond every proposer's budget, proposed by none of the corners' lists.
         let beyond = cfg.per_point.min(u16::MAX as usize) as u16;
-        for (q, sc, ins) in continuation(&cloud, &quads, &rank) {
-            quads.push(q);
-            proposers.push(1);
-            rank.push(beyond);
-            score.push(sc);
-            inside.push(ins);
-        }
+        let added = continuation(&cloud, &quads, &rank);
+        append_beyond(added, beyond, (&mut quads, &mut proposers, &mut rank, &mut score, &mut inside));
     }
     if cfg.far_per_point > 0 {
         let cloud = Cloud { points, normals: &normals, spacing: &spacing, knn: &knn, cfg };
         let beyond = cfg.per_point.min(u16::MAX as usize) as u16;
-        for (q, sc, ins) in far_completion(&cloud, &quads) {
-            quads.push(q);
-            proposers.push(1);
-            rank.push(beyond);
-            score.push(sc);
-            inside.push(ins);
-        }
+        let added = far_completion(&cloud, &quads);
+        append_beyond(added, beyond, (&mut quads, &mut proposers, &mut rank, &mut score, &mut inside));
     }
     // Final order: by canonical quad, with the per-candidate arrays alongside.
     let mut idx: Vec<usize> = (0..quads.len()).collect();
@@ -1694,11 +1728,17 @@ mod tests {
         }
     }
 
-    /// The far completion of its definition, written plainly: neighbours by sorting
-    /// every other point by distance (ties by coordinates), the diverse ones beyond the
-    /// `k` nearest, near corners and fourth corners from those lists, both turns through
-    /// `evaluate_from` with p as proposer, each point's list sorted whole and cut at
-    /// `far_per_point`, and a map from vertex set to the best entry.
+    /// A quad (canonical cyclic order) with its score and inside count.
+    type Scored = ([u32; 4], f32, u16);
+
+    /// The far completion of its definition, written plainly: every other point sorted
+    /// by (distance, index) as a kNN row is, the first `far_k` of them re-sorted with ties
+    /// by coordinates for the diverse scan, those beyond the `k` nearest kept, the 8
+    /// nearest as near corners and each far corner's 8 nearest as fourth corners, both
+    /// turns through `evaluate_from` with p as proposer, every choice among equals by
+    /// coordinates, each point's list sorted whole and cut at `far_per_point`, and a map
+    /// from vertex set to the best entry.
+
     fn far_reference(
         points: &[[f32; 3]],
         c: &Candidates,
@@ -1708,26 +1748,26 @@ mod tests {
         use crate::spatial::kdtree::dist_sq;
         let n = points.len();
         let cloud = Cloud { points, normals: &c.normals, spacing: &c.spacing, knn: &c.knn, cfg };
-        let coords = |a: u32, b: u32| {
-            let (u, v) = (points[a as usize], points[b as usize]);
-            u[0].total_cmp(&v[0]).then(u[1].total_cmp(&v[1])).then(u[2].total_cmp(&v[2]))
-        };
+        let coords = |a: u32, b: u32| coord_cmp(points[a as usize], points[b as usize]);
+        let d2 = |i: usize, a: u32| dist_sq(points[i], points[a as usize]);
         let sorted = |i: usize| -> Vec<u32> {
             let mut o: Vec<u32> = (0..n as u32).filter(|&j| j as usize != i).collect();
-            o.sort_by(|&a, &b| {
-                dist_sq(points[i], points[a as usize])
-                    .total_cmp(&dist_sq(points[i], points[b as usize]))
-                    .then_with(|| coords(a, b))
-            });
+            o.sort_by(|&a, &b| d2(i, a).total_cmp(&d2(i, b)).then(a.cmp(&b)));
             o
+        };
+        // Order of entries: lower score, then lower coordinates.
+        let order = |x: &([u32; 4], f32, u16), y: &([u32; 4], f32, u16)| {
+            x.1.total_cmp(&y.1).then_with(|| coord_order(points, &x.0, &y.0))
         };
         let have: std::collections::HashSet<[u32; 4]> = existing.iter().map(vertex_set).collect();
         let mut best: std::collections::HashMap<[u32; 4], ([u32; 4], f32, u16)> = Default::default();
         for i in 0..n {
             let o = sorted(i);
             let p = points[i];
+            let mut row: Vec<u32> = o.iter().copied().take(cfg.far_k).collect();
+            row.sort_by(|&a, &b| d2(i, a).total_cmp(&d2(i, b)).then_with(|| coords(a, b)));
             let mut div: Vec<(u32, [f32; 3])> = Vec::new();
-            for &j in o.iter().take(cfg.far_k) {
+            for &j in &row {
                 let d = sub(points[j as usize], p);
                 let l = norm(d);
                 let t = [d[0] / l, d[1] / l, d[2] / l];
@@ -1736,17 +1776,26 @@ mod tests {
                 }
             }
             div.retain(|(b, _)| !o[..cfg.k.min(o.len())].contains(b));
-            let mut found: Vec<([u32; 4], [u32; 4], f32, u16)> = Vec::new();
+            // In scan order; a vertex set met again replaces its entry only when better.
+            let mut found: Vec<([u32; 4], Scored)> = Vec::new();
             for &a in o.iter().take(8) {
                 for &(b, ub) in &div {
                     let ea = sub(points[a as usize], p);
                     let la = norm(ea);
+                    if b == a || la.is_nan() || la <= 0.0 {
+                        continue;
+                    }
                     let ua = [ea[0] / la, ea[1] / la, ea[2] / la];
                     let (pa, pb) = (points[a as usize], points[b as usize]);
                     let mut xs: Vec<(f32, u32)> = sorted(b as usize)
                         .into_iter()
                         .take(8)
-                        .filter(|&x| x as usize != i && x != a && b != a)
+                        .filter(|&x| x as usize != i && x != a)
+                        .filter(|&x| {
+                            let (lb, la) =
+                                (norm(sub(points[x as usize], pb)), norm(sub(points[x as usize], pa)));
+                            lb > 0.0 && la > 0.0
+                        })
                         .map(|x| {
                             let px = points[x as usize];
                             let (exb, exa) = (sub(px, pb), sub(px, pa));
@@ -1759,24 +1808,26 @@ mod tests {
                     if cos.is_nan() || cos < 0.8 || have.contains(&vertex_set(&q)) {
                         continue;
                     }
-                    if found.iter().any(|f| f.0 == vertex_set(&q)) {
-                        continue;
-                    }
                     let mut turns: Vec<([u32; 4], f32, u16)> = [q, [i as u32, b, x, a]]
                         .into_iter()
-                        .filter_map(|r| cloud.evaluate_from(r).map(|(sc, ins)| (r, sc, ins)))
+                        .filter_map(|r| cloud.evaluate_from(r).map(|(sc, ins)| (canonical(r), sc, ins)))
                         .collect();
-                    turns.sort_by(|u, v| u.1.total_cmp(&v.1));
-                    if let Some(&(r, sc, ins)) = turns.first() {
-                        found.push((vertex_set(&q), canonical(r), sc, ins));
+                    turns.sort_by(order);
+                    if let Some(&t) = turns.first() {
+                        match found.iter_mut().find(|f| f.0 == vertex_set(&q)) {
+                            Some(f) if order(&t, &f.1).is_lt() => f.1 = t,
+                            Some(_) => {}
+                            None => found.push((vertex_set(&q), t)),
+                        }
                     }
                 }
             }
-            found.sort_by(|u, v| u.2.total_cmp(&v.2).then_with(|| coord_order(points, &u.1, &v.1)));
-            for &(k, q, sc, ins) in found.iter().take(cfg.far_per_point) {
-                let e = best.entry(k).or_insert((q, sc, ins));
-                if sc < e.1 || (sc == e.1 && q < e.0) {
-                    *e = (q, sc, ins);
+            let mut list: Vec<([u32; 4], f32, u16)> = found.into_iter().map(|f| f.1).collect();
+            list.sort_by(order);
+            for &t in list.iter().take(cfg.far_per_point) {
+                let e = best.entry(vertex_set(&t.0)).or_insert(t);
+                if order(&t, e).then(t.0.cmp(&e.0)).is_lt() {
+                    *e = t;
                 }
             }
         }
@@ -1787,19 +1838,35 @@ mod tests {
     }
 
     /// `far_completion` against [`far_reference`], bit for bit (scores compared as bits),
-    /// on jittered lattices stretched 1:1 to 9.5:1 and a jittered wavy sheet, for budgets
-    /// of 1, 3 and 8 and both neighbour scans; it must also find something to add.
+    /// on jittered lattices stretched 1:1 to 9.5:1, a jittered wavy sheet, an exact
+    /// lattice (distance ties everywhere) and a jittered one with a quarter of its points
+    /// doubled, for budgets of 1, 3 and 8 and three neighbour scans; it must also find
+    /// something to add.
     #[test]
     fn far_completion_matches_its_plain_definition() {
         let mut added = 0;
-        for (stretch, far_k) in [(1.0f32, 64usize), (4.0, 64), (9.5, 64), (9.5, 24), (2.5, 40)] {
+        let cases: [(&str, f32, usize); 7] = [
+            ("jittered", 1.0, 64),
+            ("jittered", 4.0, 64),
+            ("jittered", 9.5, 64),
+            ("jittered", 9.5, 24),
+            ("wavy", 2.5, 40),
+            ("exact", 3.0, 64),
+            ("doubled", 3.0, 64),
+        ];
+        for (kind, stretch, far_k) in cases {
+            let jitter = if kind == "exact" { 0.0 } else { 0.15 };
             let mut pts: Vec<[f32; 3]> =
-                grid(11, 7, 0.15).into_iter().map(|p| [p[0], p[1] * stretch, p[2]]).collect();
-            if stretch == 2.5 {
+                grid(11, 7, jitter).into_iter().map(|p| [p[0], p[1] * stretch, p[2]]).collect();
+            if kind == "wavy" {
                 // A wavy sheet: a curved surface, corner normals that disagree.
                 for p in &mut pts {
                     p[2] = 1.5 * (0.5 * p[0]).sin();
                 }
+            }
+            if kind == "doubled" {
+                let copies: Vec<[f32; 3]> = pts.iter().step_by(4).copied().collect();
+                pts.extend(copies);
             }
             for per in [1usize, 3, 8] {
                 let base = CandidateConfig { far_k, ..CandidateConfig::default() };
@@ -1817,7 +1884,11 @@ mod tests {
                 let bits = |v: &[([u32; 4], f32, u16)]| -> Vec<([u32; 4], u32, u16)> {
                     v.iter().map(|&(q, sc, ins)| (q, sc.to_bits(), ins)).collect()
                 };
-                assert_eq!(bits(&got), bits(&want), "stretch {stretch}, far_k {far_k}, per point {per}");
+                assert_eq!(
+                    bits(&got),
+                    bits(&want),
+                    "{kind}, stretch {stretch}, far_k {far_k}, per point {per}"
+                );
                 added += got.len();
             }
         }

@@ -148,3 +148,16 @@ pub fn noisy_cloud(mesh: &point2quad::mesh::poly::QuadMesh, seed: u64) -> Vec<[f
     pts.extend(noise_points(mesh, &NoiseConfig::default(), &mut rng).expect("noise on a valid mesh"));
     pts
 }
+
+/// A jittered planar lattice of `nx` × `ny` points, 1 apart along x and `pitch` apart
+/// along y, row by row (jitter up to ±0.02 in x and y and ±0.0005 in z, seed 5): cells
+/// whose corners across the rows lie beyond a small k (the far completion's tests).
+pub fn rows_lattice(nx: usize, ny: usize, pitch: f64) -> Vec<[f64; 3]> {
+    let mut rng = point2quad::rng::Rng::new(5);
+    (0..nx * ny)
+        .map(|v| {
+            let (x, y) = ((v % nx) as f64, (v / nx) as f64);
+            [x + 0.04 * (rng.f64() - 0.5), pitch * y + 0.04 * (rng.f64() - 0.5), 0.001 * (rng.f64() - 0.5)]
+        })
+        .collect()
+}

@@ -1738,7 +1738,6 @@ mod tests {
     /// turns through `evaluate_from` with p as proposer, every choice among equals by
     /// coordinates, each point's list sorted whole and cut at `far_per_point`, and a map
     /// from vertex set to the best entry.
-
     fn far_reference(
         points: &[[f32; 3]],
         c: &Candidates,

@@ -219,6 +219,66 @@ fn per_mesh() {
     println!("TOTAL {} | {} ({}) | {} ({})", tot[0], tot[1], tot[2], tot[3], tot[4]);
 }
 
+/// The prototype's direction-diverse neighbours of point `i` from its kNN row `idx`
+/// (nearest first): each at a cosine under `cos_t` with every one taken before, at most
+/// `v`, duplicates of `i` skipped; with their unit directions.
+fn diverse_of(local: &[[f32; 3]], idx: &[u32], i: u32, v: usize, cos_t: f32) -> Vec<(u32, [f32; 3])> {
+    let p = local[i as usize];
+    let mut div: Vec<(u32, [f32; 3])> = vec![];
+    for &j in idx {
+        if j == i || div.len() >= v {
+            continue;
+        }
+        let q = local[j as usize];
+        let d = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
+        let dl = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        if dl == 0.0 {
+            continue;
+        }
+        let t = [d[0] / dl, d[1] / dl, d[2] / dl];
+        if div.iter().all(|(_, r)| r[0] * t[0] + r[1] * t[1] + r[2] * t[2] < cos_t) {
+            div.push((j, t));
+        }
+    }
+    div
+}
+
+/// The prototype's shape filters on the quad `q`: 0 when its edge ratio is at most
+/// `rmin`, 1 when a corner's sine is under the config's, 2 when two corner normals
+/// disagree beyond the config's dot, 3 when it passes; with its edge vectors and lengths.
+fn shape_stage(
+    local: &[[f32; 3]],
+    q: [u32; 4],
+    rmin: f32,
+    cfg: &CandidateConfig,
+) -> (u8, [[f32; 3]; 4], [f32; 4]) {
+    let sub3 = |a: [f32; 3], b: [f32; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let crs = |a: [f32; 3], b: [f32; 3]| {
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    };
+    let dt = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let qp = q.map(|k| local[k as usize]);
+    let ev: [[f32; 3]; 4] = std::array::from_fn(|s| sub3(qp[(s + 1) % 4], qp[s]));
+    let len = ev.map(|e| dt(e, e).sqrt());
+    let lmin = len.iter().copied().fold(f32::INFINITY, f32::min);
+    let lmax = len.iter().copied().fold(0.0, f32::max);
+    if lmin.is_nan() || lmin <= rmin * lmax {
+        return (0, ev, len);
+    }
+    let mut cn = [[0f32; 3]; 4];
+    for s in 0..4 {
+        let cc = crs(ev[(s + 3) % 4], ev[s]);
+        let cl = dt(cc, cc).sqrt();
+        let sine = cl / (len[(s + 3) % 4] * len[s]);
+        if sine.is_nan() || sine < cfg.min_sine {
+            return (1, ev, len);
+        }
+        cn[s] = [cc[0] / cl, cc[1] / cl, cc[2] / cl];
+    }
+    let agree = (0..4).all(|s| (0..s).all(|t| dt(cn[s], cn[t]) >= cfg.min_normal_dot));
+    (if agree { 3 } else { 2 }, ev, len)
+}
+
 /// Prototype of the far completion (the module header's `pgram`): parallelogram
 /// completion from a near neighbour a and a direction-diverse b, x among b's nearest.
 fn pgram() {
@@ -260,21 +320,7 @@ fn pgram() {
                 let (idx, _) = knn.row(i);
                 let p = local[i];
                 let near: Vec<u32> = idx.iter().copied().filter(|&j| j as usize != i).take(ka).collect();
-                let mut div: Vec<(u32, [f32; 3])> = vec![];
-                for &j in idx {
-                    if j as usize == i || div.len() >= v {
-                        continue;
-                    }
-                    let d = sub3(local[j as usize], p);
-                    let dl = nrm(d);
-                    if dl == 0.0 {
-                        continue;
-                    }
-                    let t = [d[0] / dl, d[1] / dl, d[2] / dl];
-                    if div.iter().all(|(_, r)| dt(*r, t) < cos_t) {
-                        div.push((j, t));
-                    }
-                }
+                let div = diverse_of(&local, idx, i as u32, v, cos_t);
                 let mut found: Vec<(f32, [u32; 4])> = vec![];
                 let pb_n = envf("PB", 0.0) as usize;
                 let mut bs: Vec<u32> = vec![];
@@ -330,30 +376,8 @@ fn pgram() {
                         let off = 1.0 - bests;
                         let q = [i as u32, a, x, b];
                         let qp = q.map(|k| local[k as usize]);
-                        let mut len = [0f32; 4];
-                        let mut ev = [[0f32; 3]; 4];
-                        for s in 0..4 {
-                            ev[s] = sub3(qp[(s + 1) % 4], qp[s]);
-                            len[s] = nrm(ev[s]);
-                        }
-                        let lmin = len.iter().copied().fold(f32::INFINITY, f32::min);
-                        let lmax = len.iter().copied().fold(0.0, f32::max);
-                        if lmin.is_nan() || lmin <= rmin * lmax {
-                            continue;
-                        }
-                        let mut cn = [[0f32; 3]; 4];
-                        let mut okq = true;
-                        for s in 0..4 {
-                            let cc = crs(ev[(s + 3) % 4], ev[s]);
-                            let cl = nrm(cc);
-                            let sine = cl / (len[(s + 3) % 4] * len[s]);
-                            if sine.is_nan() || sine < cfg.min_sine {
-                                okq = false;
-                                break;
-                            }
-                            cn[s] = [cc[0] / cl, cc[1] / cl, cc[2] / cl];
-                        }
-                        if !okq || (0..4).any(|s| (0..s).any(|t| dt(cn[s], cn[t]) < cfg.min_normal_dot)) {
+                        let (passed, ev, len) = shape_stage(&local, q, rmin, &cfg);
+                        if passed < 3 {
                             continue;
                         }
                         // points inside the quad (plane tolerance, edge margin)
@@ -461,57 +485,11 @@ fn pgram() {
                                     if bidx.iter().filter(|&&j| j != b).take(ka).any(|&j| j == x) {
                                         stage = 4;
                                         // diverse?
-                                        let p0 = local[pp as usize];
-                                        let mut dv: Vec<(u32, [f32; 3])> = vec![];
-                                        for &j in idx {
-                                            if j == pp || dv.len() >= v {
-                                                continue;
-                                            }
-                                            let d = sub3(local[j as usize], p0);
-                                            let dl = nrm(d);
-                                            if dl == 0.0 {
-                                                continue;
-                                            }
-                                            let t = [d[0] / dl, d[1] / dl, d[2] / dl];
-                                            if dv.iter().all(|(_, r)| dt(*r, t) < cos_t) {
-                                                dv.push((j, t));
-                                            }
-                                        }
+                                        let dv = diverse_of(&local, idx, pp, v, cos_t);
                                         if dv.iter().any(|&(j, _)| j == b) {
-                                            stage = 5;
-                                            let q = [pp, a, x, b];
-                                            let qp = q.map(|k| local[k as usize]);
-                                            let mut len = [0f32; 4];
-                                            let mut ev = [[0f32; 3]; 4];
-                                            for s in 0..4 {
-                                                ev[s] = sub3(qp[(s + 1) % 4], qp[s]);
-                                                len[s] = nrm(ev[s]);
-                                            }
-                                            let lmin = len.iter().copied().fold(f32::INFINITY, f32::min);
-                                            let lmax = len.iter().copied().fold(0.0, f32::max);
-                                            if lmin > rmin * lmax {
-                                                stage = 6;
-                                                let mut cn = [[0f32; 3]; 4];
-                                                let mut okq = true;
-                                                for s in 0..4 {
-                                                    let cc = crs(ev[(s + 3) % 4], ev[s]);
-                                                    let cl = nrm(cc);
-                                                    if (cl / (len[(s + 3) % 4] * len[s])).is_nan()
-                                                        || cl / (len[(s + 3) % 4] * len[s]) < cfg.min_sine
-                                                    {
-                                                        okq = false;
-                                                    }
-                                                    cn[s] = [cc[0] / cl, cc[1] / cl, cc[2] / cl];
-                                                }
-                                                if okq {
-                                                    stage = 7;
-                                                    if !(0..4).any(|s| {
-                                                        (0..s).any(|t| dt(cn[s], cn[t]) < cfg.min_normal_dot)
-                                                    }) {
-                                                        stage = 8;
-                                                    }
-                                                }
-                                            }
+                                            let (passed, _, _) =
+                                                shape_stage(&local, [pp, a, x, b], rmin, &cfg);
+                                            stage = 5 + passed as usize;
                                         }
                                     }
                                 }

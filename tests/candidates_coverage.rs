@@ -83,15 +83,21 @@ fn full_coverage() -> bool {
 /// measured under `make test`.
 const SUBSET_STEP: usize = 3;
 
+/// The train meshes to measure (all with `P2Q_FULL_COVERAGE`, else the subset) and
+/// whether that is all of them; `None` (and a note) when `../shared` is absent.
+fn train_files() -> Option<(Vec<std::path::PathBuf>, bool)> {
+    let Some(all_files) = mesh_files("train") else {
+        println!("skipped: ../shared/data/quads/train not found");
+        return None;
+    };
+    let full = full_coverage();
+    Some((if full { all_files } else { all_files.into_iter().step_by(SUBSET_STEP).collect() }, full))
+}
+
 #[test]
 #[ignore = "heavy: run in release by make test-heavy (about a minute on the subset; P2Q_FULL_COVERAGE=1: all 50 meshes)"]
 fn coverage_on_train_meshes_clean_and_noisy() {
-    let Some(all_files) = mesh_files("train") else {
-        println!("skipped: ../shared/data/quads/train not found");
-        return;
-    };
-    let full = full_coverage();
-    let files: Vec<_> = if full { all_files } else { all_files.into_iter().step_by(SUBSET_STEP).collect() };
+    let Some((files, full)) = train_files() else { return };
     let (clean_min, noisy_min) =
         if full { (CLEAN_MIN, NOISY_MIN) } else { (SUBSET_CLEAN_MIN, SUBSET_NOISY_MIN) };
     println!(
@@ -119,12 +125,7 @@ fn coverage_on_train_meshes_clean_and_noisy() {
 #[test]
 #[ignore = "heavy: run in release by make test-heavy (about half a minute on the subset)"]
 fn far_completion_coverage_on_train_meshes() {
-    let Some(all_files) = mesh_files("train") else {
-        println!("skipped: ../shared/data/quads/train not found");
-        return;
-    };
-    let full = full_coverage();
-    let files: Vec<_> = if full { all_files } else { all_files.into_iter().step_by(SUBSET_STEP).collect() };
+    let Some((files, full)) = train_files() else { return };
     let (clean_min, noisy_min) =
         if full { (FAR_CLEAN_MIN, FAR_NOISY_MIN) } else { (FAR_SUBSET_CLEAN_MIN, FAR_SUBSET_NOISY_MIN) };
     let base = CandidateConfig::default();

@@ -176,22 +176,23 @@ fn reconstruct_per_point_sets_the_budget() {
     assert!(one < many, "{one} vs {many}");
 }
 
+/// The lines `point2quad candidates CLOUD -o … OPTIONS` writes (it must succeed).
+fn candidate_lines(dir: &Scratch, cloud: &str, options: &[&str]) -> std::collections::BTreeSet<String> {
+    let cand = dir.p(&format!("c{}.txt", options.join("_").replace('-', "")));
+    let mut args = vec!["candidates", cloud, "-o", &cand];
+    args.extend_from_slice(options);
+    let out = p2q(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    std::fs::read_to_string(&cand).expect("test: candidates written").lines().map(str::to_string).collect()
+}
+
 /// `--continue-rank` adds candidates and keeps every one found without it (a budget of
 /// one per point leaves the continuation something to find on the sheet).
 #[test]
 fn continuation_adds_candidates_from_the_cli() {
     let dir = Scratch::new("cli_continue");
     let c = &dir.write("sheet.xyz", sheet().as_bytes());
-    let lines = |rank: &str| -> std::collections::BTreeSet<String> {
-        let cand = dir.p(&format!("c{rank}.txt"));
-        let out = p2q(&["candidates", c, "-o", &cand, "--per-point", "1", "--continue-rank", rank]);
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-        std::fs::read_to_string(&cand)
-            .expect("test: candidates written")
-            .lines()
-            .map(str::to_string)
-            .collect()
-    };
+    let lines = |rank: &str| candidate_lines(&dir, c, &["--per-point", "1", "--continue-rank", rank]);
     let (off, on) = (lines("0"), lines("1"));
     assert!(off.is_subset(&on), "continuation dropped candidates");
     assert!(on.len() > off.len(), "nothing added: {} vs {}", on.len(), off.len());
@@ -205,16 +206,7 @@ fn far_completion_adds_candidates_from_the_cli() {
     let text: String =
         rows_lattice(60, 12, 5.0).iter().map(|p| format!("{} {} {}\n", p[0], p[1], p[2])).collect();
     let c = &dir.write("rows.xyz", text.as_bytes());
-    let lines = |far: &str| -> std::collections::BTreeSet<String> {
-        let cand = dir.p(&format!("c{far}.txt"));
-        let out = p2q(&["candidates", c, "-o", &cand, "--k", "8", "--continue-rank", "0", "--far", far]);
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-        std::fs::read_to_string(&cand)
-            .expect("test: candidates written")
-            .lines()
-            .map(str::to_string)
-            .collect()
-    };
+    let lines = |far: &str| candidate_lines(&dir, c, &["--k", "8", "--continue-rank", "0", "--far", far]);
     let (off, on) = (lines("0"), lines("4"));
     assert!(off.is_subset(&on), "far completion dropped candidates");
     assert!(on.len() > off.len() + 100, "too little added: {} vs {}", on.len(), off.len());

@@ -474,19 +474,15 @@ fn convex_sign(q: [[f32; 2]; 4]) -> i32 {
 fn coord_order(points: &[[f32; 3]], a: &[u32; 4], b: &[u32; 4]) -> std::cmp::Ordering {
     let key = |q: &[u32; 4]| {
         let mut c = q.map(|i| points[i as usize]);
-        c.sort_by(|x, y| x[0].total_cmp(&y[0]).then(x[1].total_cmp(&y[1])).then(x[2].total_cmp(&y[2])));
+        c.sort_by(|x, y| coord_cmp(*x, *y));
         c
     };
     let (ka, kb) = (key(a), key(b));
-    for i in 0..4 {
-        for d in 0..3 {
-            let o = ka[i][d].total_cmp(&kb[i][d]);
-            if o.is_ne() {
-                return o;
-            }
-        }
-    }
-    std::cmp::Ordering::Equal
+    ka.iter()
+        .zip(&kb)
+        .map(|(x, y)| coord_cmp(*x, *y))
+        .find(|o| o.is_ne())
+        .unwrap_or(std::cmp::Ordering::Equal)
 }
 
 /// Per-thread buffers of [`propose`], reused from one proposer to the next.
@@ -1502,16 +1498,15 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
         inside.push(all[s].4);
         s = e;
     }
+    // The steps after the proposal rank from one corner as it would; what they add
+    // stands beyond every proposer's budget, proposed by none of the corners' lists.
+    let cloud = Cloud { points, normals: &normals, spacing: &spacing, knn: &knn, cfg };
+    let beyond = cfg.per_point.min(u16::MAX as usize) as u16;
     if cfg.continue_rank > 0 {
-        let cloud = Cloud { points, normals: &normals, spacing: &spacing, knn: &knn, cfg };
-        // Beyond every proposer's budget, proposed by none of the corners' lists.
-        let beyond = cfg.per_point.min(u16::MAX as usize) as u16;
         let added = continuation(&cloud, &quads, &rank);
         append_beyond(added, beyond, (&mut quads, &mut proposers, &mut rank, &mut score, &mut inside));
     }
     if cfg.far_per_point > 0 {
-        let cloud = Cloud { points, normals: &normals, spacing: &spacing, knn: &knn, cfg };
-        let beyond = cfg.per_point.min(u16::MAX as usize) as u16;
         let added = far_completion(&cloud, &quads);
         append_beyond(added, beyond, (&mut quads, &mut proposers, &mut rank, &mut score, &mut inside));
     }
@@ -1743,7 +1738,7 @@ mod tests {
         c: &Candidates,
         cfg: &CandidateConfig,
         existing: &[[u32; 4]],
-    ) -> Vec<([u32; 4], f32, u16)> {
+    ) -> Vec<Scored> {
         use crate::spatial::kdtree::dist_sq;
         let n = points.len();
         let cloud = Cloud { points, normals: &c.normals, spacing: &c.spacing, knn: &c.knn, cfg };
@@ -1755,11 +1750,10 @@ mod tests {
             o
         };
         // Order of entries: lower score, then lower coordinates.
-        let order = |x: &([u32; 4], f32, u16), y: &([u32; 4], f32, u16)| {
-            x.1.total_cmp(&y.1).then_with(|| coord_order(points, &x.0, &y.0))
-        };
+        let order =
+            |x: &Scored, y: &Scored| x.1.total_cmp(&y.1).then_with(|| coord_order(points, &x.0, &y.0));
         let have: std::collections::HashSet<[u32; 4]> = existing.iter().map(vertex_set).collect();
-        let mut best: std::collections::HashMap<[u32; 4], ([u32; 4], f32, u16)> = Default::default();
+        let mut best: std::collections::HashMap<[u32; 4], Scored> = Default::default();
         for i in 0..n {
             let o = sorted(i);
             let p = points[i];
@@ -1807,7 +1801,7 @@ mod tests {
                     if cos.is_nan() || cos < 0.8 || have.contains(&vertex_set(&q)) {
                         continue;
                     }
-                    let mut turns: Vec<([u32; 4], f32, u16)> = [q, [i as u32, b, x, a]]
+                    let mut turns: Vec<Scored> = [q, [i as u32, b, x, a]]
                         .into_iter()
                         .filter_map(|r| cloud.evaluate_from(r).map(|(sc, ins)| (canonical(r), sc, ins)))
                         .collect();
@@ -1821,7 +1815,7 @@ mod tests {
                     }
                 }
             }
-            let mut list: Vec<([u32; 4], f32, u16)> = found.into_iter().map(|f| f.1).collect();
+            let mut list: Vec<Scored> = found.into_iter().map(|f| f.1).collect();
             list.sort_by(order);
             for &t in list.iter().take(cfg.far_per_point) {
                 let e = best.entry(vertex_set(&t.0)).or_insert(t);
@@ -1880,7 +1874,7 @@ mod tests {
                 };
                 let got = far_completion(&cloud, &c0.quads);
                 let want = far_reference(&pts, &c0, &cfg, &c0.quads);
-                let bits = |v: &[([u32; 4], f32, u16)]| -> Vec<([u32; 4], u32, u16)> {
+                let bits = |v: &[Scored]| -> Vec<([u32; 4], u32, u16)> {
                     v.iter().map(|&(q, sc, ins)| (q, sc.to_bits(), ins)).collect()
                 };
                 assert_eq!(

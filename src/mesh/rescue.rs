@@ -47,6 +47,11 @@ pub struct RescueConfig {
     /// training set's organic and thin meshes), and that bound refused their true faces
     /// (session 25), while they almost never fold back so far (1 under −0.95).
     pub min_normal_dot: f64,
+    /// A candidate is refused when inserting it leaves more odd boundary loops around
+    /// its corners than there were (session 30: an odd loop cannot be closed by quads
+    /// over its own vertices, so a rescue that splits an even hole into two odd ones
+    /// leaves both open).
+    pub keep_parity: bool,
 }
 
 impl Default for RescueConfig {
@@ -58,6 +63,7 @@ impl Default for RescueConfig {
             max_passes: 16,
             lone_min_prob: None,
             min_normal_dot: -0.9,
+            keep_parity: false,
         }
     }
 }
@@ -200,7 +206,15 @@ pub fn rescue_faces(
                 Some(g) if enough(mesh, c, g) => {}
                 _ => continue,
             }
-            if mesh.add_face(faces[c].map(VertexId)).is_ok() {
+            let odd_before = if cfg.keep_parity { odd_loops_at(mesh, &faces[c]) } else { 0 };
+            if let Ok(f) = mesh.add_face(faces[c].map(VertexId)) {
+                // Taking a face just added out again restores the border it met.
+                if cfg.keep_parity
+                    && odd_loops_at(mesh, &faces[c]) > odd_before
+                    && mesh.remove_face(f).is_ok()
+                {
+                    continue;
+                }
                 used[c] = true;
                 inserted.push(c);
                 added += 1;
@@ -211,6 +225,35 @@ pub fn rescue_faces(
         }
     }
     inserted
+}
+
+/// How many of the boundary loops through the vertices `vs` have an odd number of edges
+/// (each loop counted once).
+fn odd_loops_at(mesh: &HalfedgeMesh, vs: &[u32; 4]) -> usize {
+    let mut seen: Vec<u32> = Vec::new();
+    let mut odd = 0;
+    for &v in vs {
+        for h in mesh.vertex_outgoing(VertexId(v)) {
+            if !mesh.is_boundary(h) {
+                continue;
+            }
+            // The loop's smallest half-edge index names it.
+            let (mut c, mut len, mut least) = (h, 0usize, h.idx());
+            loop {
+                least = least.min(c.idx());
+                len += 1;
+                c = mesh.next(c);
+                if c == h {
+                    break;
+                }
+            }
+            if !seen.contains(&(least as u32)) {
+                seen.push(least as u32);
+                odd += len % 2;
+            }
+        }
+    }
+    odd
 }
 
 #[cfg(test)]

@@ -56,6 +56,9 @@ OPTIONS:
                           --rescue-min-prob, 0 <= P <= 1 (session 23 experiment;
                           default: never)
     --no-rescue           do not rescue candidates at holes
+    --rescue-keep-parity  refuse a rescued candidate that leaves more odd boundary
+                          loops (which quads cannot close) than it found (session 30
+                          experiment; default: off)
     --no-unfold           keep predicted faces folded back over a neighbour (default:
                           of each edge whose two quads' normals have a dot under
                           -0.95, the less probable face is taken out after insertion,
@@ -115,6 +118,7 @@ const SPEC: Spec = Spec {
     switches: &[
         "--no-postprocess",
         "--no-rescue",
+        "--rescue-keep-parity",
         "--no-unfold",
         "--no-close",
         "--no-seal",
@@ -189,6 +193,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     pp.rescue.min_prob =
         a.parsed_in(cmd, "--rescue-min-prob", pp.rescue.min_prob, 0.0, 1.0, "it is a probability")?;
     pp.rescue.enabled = !a.switch("--no-rescue");
+    pp.rescue.keep_parity = a.switch("--rescue-keep-parity");
     // Settings of a step that is turned off would be ignored without a word.
     for opt in ["--rescue-min-prob", "--rescue-lone"] {
         if !pp.rescue.enabled && a.value(opt).is_some() {

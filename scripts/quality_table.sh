@@ -7,6 +7,8 @@
 # Extra reconstruct options can be given in RECONSTRUCT_ARGS (e.g. "--threshold 0.7").
 # Extra synth options in SYNTH_ARGS (e.g. "--jitter 0.02": vertices moved too); the
 # ground truth is then the mesh synth writes (--gt), not the file in MESH_DIR.
+# SHUFFLE=S shuffles each cloud's points (seed S) before reconstructing: synth writes the
+# mesh's vertices first and noise points last, an order no scanner gives (session 30).
 # Example: scripts/quality_table.sh target/release/point2quad ../shared/data/quads/eval 0.1
 set -euo pipefail
 BIN=$1; DIR=$2; NOISE=${3:-0.1}; MODEL=${4:-}; OUT=${5:-out/quality}
@@ -18,6 +20,16 @@ for f in "$DIR"/*.obj "$DIR"/*.off "$DIR"/*.ply; do
   ref=$f
   if [ -n "${SYNTH_ARGS:-}" ]; then ref=$OUT/$name.gt.obj; fi
   "$BIN" synth --from "$f" --noise "$NOISE" --seed 1 -o "$OUT/$name.xyz" ${SYNTH_ARGS:+--gt "$ref"} ${SYNTH_ARGS:-} 2>/dev/null
+  if [ -n "${SHUFFLE:-}" ]; then
+    python3 - "$OUT/$name.xyz" "$SHUFFLE" <<'PY'
+import random, sys
+lines = open(sys.argv[1]).readlines()
+head = [l for l in lines if l.startswith("#")]
+pts = [l for l in lines if not l.startswith("#")]
+random.Random(int(sys.argv[2])).shuffle(pts)
+open(sys.argv[1], "w").writelines(head + pts)
+PY
+  fi
   t0=$(date +%s.%N)
   if "$BIN" reconstruct "$OUT/$name.xyz" -o "$OUT/$name.obj" ${MODEL:+--model "$MODEL"} ${RECONSTRUCT_ARGS:-} \
        --svg "$OUT/$name.svg" 2> "$OUT/$name.log"; then

@@ -1208,6 +1208,18 @@ const FAR_DIVERSE_COS: f32 = 0.866_025_4;
 /// (cosine, about 37°).
 const FAR_MIN_COS: f32 = 0.8;
 
+/// The cyclic quad `q` (direction kept) rotated to start at its corner of smallest
+/// coordinates (by x, then y, then z; among equal ones the smallest index). A start that
+/// does not depend on how the points are numbered: training samples use it (their noise
+/// points come after the mesh vertices), and `reconstruct`, whose points are numbered
+/// in coordinate order, gets the same from [`canonical`].
+pub fn start_at_least_corner(points: &[[f32; 3]], q: [u32; 4]) -> [u32; 4] {
+    let s = (0..4)
+        .min_by(|&a, &b| coord_cmp(points[q[a] as usize], points[q[b] as usize]).then(q[a].cmp(&q[b])))
+        .expect("internal error: 4 corners");
+    [q[s], q[(s + 1) % 4], q[(s + 2) % 4], q[(s + 3) % 4]]
+}
+
 /// Lexicographic order of two points' coordinates: the tie-break that does not depend
 /// on point indices.
 fn coord_cmp(a: [f32; 3], b: [f32; 3]) -> std::cmp::Ordering {

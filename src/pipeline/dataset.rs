@@ -495,7 +495,8 @@ pub fn synthetic_mesh_with_aspect(
 
 /// Builds a labelled sample from a ground-truth quad mesh: noise points appended after the
 /// mesh vertices ([`noise_points`]), the whole cloud normalised by [`Frame`], candidates
-/// from [`candidates::generate`], features [`features::face_input`] (F_info then the context features), labels by
+/// from [`candidates::generate`] (each started at its corner of smallest coordinates,
+/// [`candidates::start_at_least_corner`]), features [`features::face_input`] (F_info then the context features), labels by
 /// [`label_candidates`].
 ///
 /// # Errors
@@ -519,7 +520,15 @@ pub fn build_sample(
     all.extend(extra);
     let frame = Frame::fit(&all)?;
     let points: Vec<[f32; 3]> = all.iter().map(|&p| frame.to_local(p)).collect();
-    let cands = candidates::generate(&points, cand_cfg)?;
+    let mut cands = candidates::generate(&points, cand_cfg)?;
+    // Each candidate starts at its corner of smallest coordinates, not at its smallest
+    // index (session 30): here mesh vertices come first and noise points last, so a
+    // smallest-index start is never a noise point, and a network trained on that learnt
+    // a cue no real cloud gives (`reconstruct` takes points in coordinate order, where
+    // the smallest index is the smallest coordinates).
+    for q in &mut cands.quads {
+        *q = candidates::start_at_least_corner(&points, *q);
+    }
     let features = features::face_input(&points, &cands, true);
     let labels = label_candidates(&cands.quads, &mesh.quads);
     let sample = Sample {

@@ -414,7 +414,9 @@ fn merge_passes(
 #[derive(Clone, Debug)]
 pub struct PreparedCloud {
     /// Input index of each point the pipeline works on (the first of each group of
-    /// duplicates or near-duplicates; far outliers left out), in input order.
+    /// duplicates or near-duplicates; far outliers left out), in coordinate order (by x,
+    /// then y, then z; since session 30), so that no later stage depends on the input's
+    /// order.
     pub distinct: Vec<u32>,
     /// Those points, as given.
     pub uniq: Vec<[f64; 3]>,
@@ -528,6 +530,21 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
             frame = Frame::fit(&uniq)?;
             local = frame.to_local_all(&uniq);
         }
+    }
+    // Nothing downstream may depend on the input's order (session 30: a shuffled cloud
+    // lost recall, as candidates' corners started at their smallest index and the
+    // network had learnt that noise points come last): the points are taken in
+    // coordinate order, and every later tie that falls by index falls by position.
+    let key = |i: u32| points[i as usize].map(|c| c + 0.0);
+    let by_coords = |a: &u32, b: &u32| {
+        let (p, q) = (key(*a), key(*b));
+        p[0].total_cmp(&q[0]).then(p[1].total_cmp(&q[1])).then(p[2].total_cmp(&q[2]))
+    };
+    if !distinct.windows(2).all(|w| by_coords(&w[0], &w[1]).is_lt()) {
+        distinct.sort_by(by_coords);
+        uniq = distinct.iter().map(|&i| points[i as usize]).collect();
+        frame = Frame::fit(&uniq)?;
+        local = frame.to_local_all(&uniq);
     }
     let duplicates = points.len() - distinct.len() - outliers - unresolved;
     Ok(PreparedCloud {

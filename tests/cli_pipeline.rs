@@ -439,11 +439,20 @@ fn refine_trains_rounds_that_reconstruct_reads() {
         let err = fails(&["reconstruct", &cloud, "-o", &s.p("never.obj"), opt, "0.3", "--no-rescue"], 2);
         assert!(err.contains(opt) && err.contains("--no-rescue"), "{err}");
     }
+    // `--rescue-keep-parity` (session 30, off by default): accepted, and refused beside
+    // `--no-rescue`.
+    ok(&["reconstruct", &cloud, "-o", &mesh, "--model", &refined, "--rescue-keep-parity"]);
+    let q = point2quad::io::mesh_io::read_mesh(Path::new(&mesh)).unwrap().to_quads().expect("pure quad");
+    validate(&HalfedgeMesh::from_quads(q.vertices.len(), &q.quads).expect("manifold")).expect("valid");
+    let err =
+        fails(&["reconstruct", &cloud, "-o", &s.p("never.obj"), "--rescue-keep-parity", "--no-rescue"], 2);
+    assert!(err.contains("--rescue-keep-parity") && err.contains("--no-rescue"), "{err}");
     // Post-process settings with the post-process off were ignored without a word.
     let never_obj = s.p("never.obj");
     for opt in [
         &["--max-floater-faces", "2"][..],
         &["--rescue-min-prob", "0.3"],
+        &["--rescue-keep-parity"],
         &["--no-close"],
         &["--no-untangle"],
         &["--no-unfold"],

@@ -82,7 +82,27 @@ fn sample_layout_labels_and_determinism() {
     let dim = F_INFO_DIM + CONTEXT_DIM;
     assert_eq!(s.feature_dim as usize, dim);
     assert_eq!(s.features.len(), s.candidates.len() * dim);
-    assert_eq!(s.features, face_input(&s.points, &generate(&s.points, &cfg).unwrap(), true));
+    // The candidates of `generate`, each started at its corner of smallest coordinates
+    // (session 30: not at its smallest index, which is never a noise point here).
+    let mut c = generate(&s.points, &cfg).unwrap();
+    assert_eq!(s.candidates.len(), c.quads.len());
+    let mut started_elsewhere = 0;
+    for (got, q) in s.candidates.iter().zip(&c.quads) {
+        let k = (0..4).find(|&k| q[k] == got[0]).expect("a corner of the generated quad");
+        assert_eq!(*got, [q[k], q[(k + 1) % 4], q[(k + 2) % 4], q[(k + 3) % 4]], "a rotation of {q:?}");
+        let least = got.iter().map(|&v| s.points[v as usize]).fold([f32::INFINITY; 3], |m, p| {
+            if (p[0], p[1], p[2]) < (m[0], m[1], m[2]) {
+                p
+            } else {
+                m
+            }
+        });
+        assert_eq!(s.points[got[0] as usize], least, "{got:?} starts at its smallest corner");
+        started_elsewhere += usize::from(k != 0);
+    }
+    assert!(started_elsewhere > s.candidates.len() / 4, "{started_elsewhere} of {}", s.candidates.len());
+    c.quads = s.candidates.clone();
+    assert_eq!(s.features, face_input(&s.points, &c, true));
     assert_eq!(s.labels, label_candidates(&s.candidates, &mesh.quads));
     assert!(s.positives() > 0 && s.coverage() > 0.0);
     // Same seed, same bytes; round trip through the format.

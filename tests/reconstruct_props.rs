@@ -24,6 +24,15 @@ fn model() -> &'static Model {
     M.get_or_init(|| Model::new(ModelConfig::default_preset(), 7).expect("test: model"))
 }
 
+/// The shipped weights: real scores, so the faces compared are many.
+fn shipped() -> &'static Model {
+    static M: OnceLock<Model> = OnceLock::new();
+    M.get_or_init(|| {
+        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/point2quad-default.p2qm");
+        Model::load(std::path::Path::new(p)).expect("test: shipped weights")
+    })
+}
+
 /// A small noisy cloud (a few hundred points) of shape `kind`. Every coordinate is
 /// jittered by up to ±5e-4 (about 0.5% of an edge): the generators' regular grids have
 /// exact ties (a vertex's two neighbours along a ring are equally far), which rounding
@@ -100,6 +109,30 @@ proptest! {
         assert_prefix(&m, &pts);
     }
 
+    /// The input's order does not matter (session 30): `reconstruct` takes the points
+    /// in coordinate order, so a shuffled cloud gives the same faces on the same points
+    /// (mapped through the shuffle), in the same order, and the same added vertices, bit
+    /// for bit. Before, candidates started at their smallest input index and the
+    /// network's scores followed it (47 of 1,850 faces differed on a shuffled cloud).
+    #[test]
+    fn any_order_gives_the_same_faces(kind in 0u8..4, seed in 0u64..1000) {
+        let pts = cloud(kind, seed);
+        let mut order: Vec<usize> = (0..pts.len()).collect();
+        Rng::new(seed ^ 0x0dd).shuffle(&mut order);
+        // shuffled[j] = pts[order[j]]
+        let shuffled: Vec<[f64; 3]> = order.iter().map(|&i| pts[i]).collect();
+        let cfg = ReconstructConfig::default();
+        let a = reconstruct(&pts, shipped(), &cfg).expect("reconstruct");
+        let b = reconstruct(&shuffled, shipped(), &cfg).expect("reconstruct shuffled");
+        let n = pts.len();
+        let back = |v: u32| if (v as usize) < n { order[v as usize] as u32 } else { v };
+        let mapped: Vec<[u32; 4]> = b.quads.iter().map(|q| q.map(back)).collect();
+        prop_assert!(a.quads.len() > 50, "{} faces", a.quads.len());
+        prop_assert_eq!(&a.quads, &mapped);
+        let bits = |m: &QuadMesh| m.vertices[n..].iter().map(|p| p.map(f64::to_bits)).collect::<Vec<_>>();
+        prop_assert_eq!(bits(&a), bits(&b));
+    }
+
     /// A power-of-two scale is exact in floating point: the centroid, the radius and
     /// `(p − c) / s` all scale exactly, so the local frame, hence every later stage, is
     /// bit-identical and the faces must be equal (not just close).
@@ -154,13 +187,24 @@ fn without_postprocess_returns_the_raw_predicted_faces() {
     for threshold in [0.0f32, 0.3, 0.5, 0.7] {
         let cfg = ReconstructConfig { threshold, run_postprocess: false, ..Default::default() };
         let m = reconstruct(&pts, model(), &cfg).expect("reconstruct");
-        // Reference: the same stages by hand.
-        let f = Frame::fit(&pts).unwrap();
-        let local = f.to_local_all(&pts);
+        // Reference: the same stages by hand, on the points in coordinate order.
+        let mut order: Vec<usize> = (0..pts.len()).collect();
+        order.sort_by(|&a, &b| {
+            let (p, q) = (pts[a], pts[b]);
+            p[0].total_cmp(&q[0]).then(p[1].total_cmp(&q[1])).then(p[2].total_cmp(&q[2]))
+        });
+        let sorted_pts: Vec<[f64; 3]> = order.iter().map(|&i| pts[i]).collect();
+        let f = Frame::fit(&sorted_pts).unwrap();
+        let local = f.to_local_all(&sorted_pts);
         let c = generate(&local, &cfg.candidates).unwrap();
         let p = model().predict(&face_input(&local, &c, model().config().use_context)).unwrap();
-        let want: Vec<[u32; 4]> =
-            c.quads.iter().zip(&p).filter(|(_, &p)| p > threshold).map(|(q, _)| *q).collect();
+        let want: Vec<[u32; 4]> = c
+            .quads
+            .iter()
+            .zip(&p)
+            .filter(|(_, &p)| p > threshold)
+            .map(|(q, _)| q.map(|v| order[v as usize] as u32))
+            .collect();
         assert_eq!(m.quads, want, "threshold {threshold}");
         assert_eq!(m.vertices, pts);
         if threshold == 0.0 {

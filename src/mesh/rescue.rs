@@ -266,6 +266,106 @@ mod tests {
         (m.vertices, m.quads)
     }
 
+    /// Odd boundary loops of a mesh, counted from `boundary_loops` (not the rescue's walk).
+    fn odd_loops(mesh: &HalfedgeMesh) -> usize {
+        mesh.boundary_loops().iter().filter(|l| l.len() % 2 == 1).count()
+    }
+
+    /// `keep_parity` (session 30): a quad glued on two opposite sides of an even hole that
+    /// splits it into a triangle and a pentagon is refused; a true cell glued on three
+    /// sides of the same hole, which leaves it even, still goes in.
+    #[test]
+    fn keep_parity_refuses_a_quad_that_splits_an_even_hole_into_odd_ones() {
+        let (p, q) = grid(5);
+        // Hole: the cells (1..=3, 2) in row 2, a 1 × 3 strip with an 8-edge border.
+        // Vertex (i, j) is 6j + i: the strip's bottom row is 13..=16, its top 19..=22.
+        let strip = |i: usize| matches!(i % 5, 1..=3) && i / 5 == 2;
+        let keep: Vec<[u32; 4]> = q.iter().enumerate().filter(|(i, _)| !strip(*i)).map(|(_, f)| *f).collect();
+        let fresh = || HalfedgeMesh::from_quads(p.len(), &keep).unwrap();
+        let before = fresh();
+        assert_eq!(odd_loops(&before), 0);
+        // The wrong quad: the bottom edge 13 → 14 and the top edge 21 → 20, two border
+        // edges apart; it leaves a triangle (13, 20, 19) and a pentagon (14, 15, 16, 22, 21).
+        let wrong = [13u32, 14, 21, 20];
+        let cell = [13u32, 14, 20, 19];
+        let on = RescueConfig { keep_parity: true, ..RescueConfig::default() };
+        for (cfg, want_in, want_odd) in [(RescueConfig::default(), true, 2), (on.clone(), false, 0)] {
+            let mut mesh = fresh();
+            let got = rescue_faces(&mut mesh, &p, &[wrong], &[0.4], &[0], &cfg);
+            validate(&mesh).unwrap();
+            assert_eq!(!got.is_empty(), want_in, "keep_parity {}", cfg.keep_parity);
+            assert_eq!(odd_loops(&mesh), want_odd, "keep_parity {}", cfg.keep_parity);
+            if !want_in {
+                assert_eq!(mesh.corner_sets(), before.corner_sets(), "refused: the mesh is as it was");
+            }
+        }
+        let mut mesh = fresh();
+        let got = rescue_faces(&mut mesh, &p, &[cell], &[0.4], &[0], &on);
+        validate(&mesh).unwrap();
+        assert_eq!(got, vec![0]);
+        assert_eq!(odd_loops(&mesh), 0);
+    }
+
+    /// With `keep_parity`, however many quads the rescue inserts, the mesh never has more
+    /// odd loops than before it (each insertion keeps the count around its corners, and
+    /// the other loops do not change), on random holes and random pools: the dropped
+    /// cells, their sheared rivals and random quads over their vertices; the mesh stays
+    /// valid. Without `keep_parity` the same pools add odd loops (checked, so the
+    /// property is not vacuous: 8 of the 200 trials).
+    #[test]
+    fn keep_parity_never_adds_an_odd_loop() {
+        let (p, q) = grid(6);
+        let on = RescueConfig { keep_parity: true, ..RescueConfig::default() };
+        let mut rng = crate::rng::Rng::new(3);
+        let (mut inserted_total, mut worse_without) = (0, 0);
+        for trial in 0..200 {
+            let drop: Vec<bool> = (0..q.len()).map(|_| rng.below(3) == 0).collect();
+            let keep: Vec<[u32; 4]> = q.iter().zip(&drop).filter(|(_, d)| !**d).map(|(f, _)| *f).collect();
+            let Ok(mut mesh) = HalfedgeMesh::from_quads(p.len(), &keep) else { continue };
+            let odd_before = odd_loops(&mesh);
+            // Pool: the dropped cells and random quads of vertices of dropped cells.
+            let verts: Vec<u32> =
+                q.iter().zip(&drop).filter(|(_, d)| **d).flat_map(|(f, _)| f.iter().copied()).collect();
+            if verts.is_empty() {
+                continue;
+            }
+            let mut pool: Vec<[u32; 4]> = q.iter().zip(&drop).filter(|(_, d)| **d).map(|(f, _)| *f).collect();
+            // Wrong rivals of each dropped cell: the cell sheared by one column either way
+            // (top edge moved right or left), which glue to a hole on two opposite sides.
+            for (c, _) in q.iter().enumerate().filter(|(c, _)| drop[*c]) {
+                let (i, j) = ((c % 6) as u32, (c / 6) as u32);
+                let v = |x: u32, y: u32| 7 * y + x;
+                if i + 2 <= 6 {
+                    pool.push([v(i, j), v(i + 1, j), v(i + 2, j + 1), v(i + 1, j + 1)]);
+                }
+                if i >= 1 {
+                    pool.push([v(i, j), v(i + 1, j), v(i, j + 1), v(i - 1, j + 1)]);
+                }
+            }
+            for _ in 0..40 {
+                let mut f = [0u32; 4].map(|_| verts[rng.below(verts.len())]);
+                f.sort_unstable();
+                if f.windows(2).any(|w| w[0] == w[1]) {
+                    continue;
+                }
+                // A random cyclic order of the four.
+                rng.shuffle(&mut f);
+                pool.push(f);
+            }
+            let probs: Vec<f32> = pool.iter().map(|_| 0.1 + 0.4 * rng.f32()).collect();
+            let idx: Vec<usize> = (0..pool.len()).collect();
+            let mut plain = mesh.clone();
+            let got = rescue_faces(&mut mesh, &p, &pool, &probs, &idx, &on);
+            validate(&mesh).unwrap();
+            assert!(odd_loops(&mesh) <= odd_before, "trial {trial}: {} > {odd_before}", odd_loops(&mesh));
+            inserted_total += got.len();
+            rescue_faces(&mut plain, &p, &pool, &probs, &idx, &RescueConfig::default());
+            worse_without += usize::from(odd_loops(&plain) > odd_before);
+        }
+        assert!(inserted_total > 100, "the rescue inserted {inserted_total} quads in all");
+        assert!(worse_without >= 4, "without keep_parity {worse_without} trials added odd loops");
+    }
+
     #[test]
     fn a_hole_is_tiled_by_its_low_probability_candidates() {
         let (p, q) = grid(5);

@@ -2082,6 +2082,40 @@ mod tests {
         }
     }
 
+    /// `start_at_least_corner` against its plain definition on random quads: the same
+    /// cycle, started at the corner whose (x, y, z) is smallest, the smallest index among
+    /// equal ones; and under any renumbering of the points the same corner comes first.
+    #[test]
+    fn start_at_least_corner_matches_its_definition() {
+        let mut rng = crate::rng::Rng::new(30);
+        for trial in 0..500 {
+            // Coarse coordinates, so that equal values (and equal points) occur.
+            let n = 6;
+            let pts: Vec<[f32; 3]> = (0..n).map(|_| [0, 1, 2].map(|_| rng.below(3) as f32)).collect();
+            let mut ids: Vec<u32> = (0..n as u32).collect();
+            rng.shuffle(&mut ids);
+            let q = [ids[0], ids[1], ids[2], ids[3]];
+            let got = start_at_least_corner(&pts, q);
+            let key = |v: u32| (pts[v as usize].map(f32::to_bits), v);
+            let want_first = *q.iter().min_by_key(|&&v| key(v)).unwrap();
+            let k = q.iter().position(|&v| v == want_first).unwrap();
+            assert_eq!(got, [q[k], q[(k + 1) % 4], q[(k + 2) % 4], q[(k + 3) % 4]], "trial {trial}: {pts:?}");
+            // Renumbered points: the first corner is the same point when its coordinates
+            // are unique among the quad's corners.
+            let mut perm: Vec<u32> = (0..n as u32).collect();
+            rng.shuffle(&mut perm); // new index of old point i is perm[i]
+            let mut moved = pts.clone();
+            for i in 0..n {
+                moved[perm[i] as usize] = pts[i];
+            }
+            let again = start_at_least_corner(&moved, q.map(|v| perm[v as usize]));
+            let unique = q.iter().filter(|&&v| pts[v as usize] == pts[want_first as usize]).count() == 1;
+            if unique {
+                assert_eq!(again, got.map(|v| perm[v as usize]), "trial {trial}");
+            }
+        }
+    }
+
     #[test]
     fn bad_input_errors_and_degenerate_input_does_not_panic() {
         let cfg = CandidateConfig::default();

@@ -523,7 +523,15 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
         if roots.iter().enumerate().any(|(i, &r)| r as usize != i) {
             let keep: Vec<usize> = (0..roots.len()).filter(|&i| roots[i] as usize == i).collect();
             if keep.len() < 4 {
-                return Err(too_few(keep.len()));
+                // Not "distinct": the points are distinct, the merge made them one.
+                return Err(Error::invalid(format!(
+                    "point cloud: merging near-duplicates (points closer than {merge_share} times the \
+                     distance to their 8th nearest other point) leaves {} of its {} distinct points; at \
+                     least 4 are needed for a quad. Groups of 8 or fewer points far from the rest \
+                     merge this way; a merge share of 0 (`--merge-share 0`) merges exact duplicates only",
+                    keep.len(),
+                    roots.len()
+                )));
             }
             distinct = keep.iter().map(|&i| distinct[i]).collect();
             uniq = distinct.iter().map(|&i| points[i as usize]).collect();
@@ -589,12 +597,14 @@ fn check_probabilities(k: usize, p: &[f32]) -> Result<()> {
 pub const OUTLIER_RADII: f64 = 1e4;
 
 /// Indices of the far outliers of `points`: farther from the coordinate-wise median than
-/// [`OUTLIER_RADII`] times the 95th percentile of all points' distances from it. A quad
-/// cannot join such a point to the rest (edge ratios below 1e-4), and normalising the
-/// cloud with it would leave the rest below f32 resolution. Empty when that percentile
-/// is 0 (most points identical) or for fewer than 20 points (no bulk to speak of).
+/// [`OUTLIER_RADII`] times the median of all points' distances from it. A quad cannot
+/// join such a point to the rest (edge ratios below 1e-4), and normalising the cloud
+/// with it would leave the rest below f32 resolution. The median, not a high percentile
+/// (the 95th until session 30): up to half the points may be strays (a cloud with 36
+/// points at 1e9 beside 640 on a torus lost the torus to them). Empty when that median
+/// is 0 (most points identical) or for fewer than 5 points (none can go: 4 are needed).
 pub fn far_outliers(points: &[[f64; 3]]) -> Vec<usize> {
-    if points.len() < 20 {
+    if points.len() < MIN_POINTS_FOR_OUTLIERS {
         return Vec::new();
     }
     // In raw coordinates, with a scaled norm: squares overflow at 1e200 and vanish at
@@ -618,13 +628,16 @@ pub fn far_outliers(points: &[[f64; 3]]) -> Vec<usize> {
     };
     let d: Vec<f64> = points.iter().map(norm).collect();
     let mut sorted = d.clone();
-    let at = (sorted.len() * 95) / 100;
-    let r95 = *sorted.select_nth_unstable_by(at, f64::total_cmp).1;
-    if r95 <= 0.0 {
+    let mid = sorted.len() / 2;
+    let r50 = *sorted.select_nth_unstable_by(mid, f64::total_cmp).1;
+    if r50 <= 0.0 {
         return Vec::new();
     }
-    (0..d.len()).filter(|&i| d[i] > OUTLIER_RADII * r95).collect()
+    (0..d.len()).filter(|&i| d[i] > OUTLIER_RADII * r50).collect()
 }
+
+/// Clouds with fewer points have no far outliers ([`far_outliers`]).
+pub const MIN_POINTS_FOR_OUTLIERS: usize = 5;
 
 /// Near-duplicate groups of a normalised cloud with no exact duplicates: `roots[i]` is
 /// the smallest index of the group of point `i`. Points `i` and `j` join when `j` is

@@ -195,6 +195,11 @@ pub fn run(argv: &[String]) -> Result<()> {
     pp.rescue.enabled = !a.switch("--no-rescue");
     pp.rescue.keep_parity = a.switch("--rescue-keep-parity");
     // Settings of a step that is turned off would be ignored without a word.
+    if !pp.rescue.enabled && pp.rescue.keep_parity {
+        return Err(Error::Usage(format!(
+            "{cmd}: --rescue-keep-parity has no effect with --no-rescue; give one of them"
+        )));
+    }
     for opt in ["--rescue-min-prob", "--rescue-lone"] {
         if !pp.rescue.enabled && a.value(opt).is_some() {
             return Err(Error::Usage(format!(
@@ -228,8 +233,15 @@ pub fn run(argv: &[String]) -> Result<()> {
             "--second-pass-tau",
             "--second-pass-cover",
         ];
-        let switches =
-            ["--no-rescue", "--no-unfold", "--no-close", "--no-seal", "--no-inverted-fills", "--no-untangle"];
+        let switches = [
+            "--no-rescue",
+            "--rescue-keep-parity",
+            "--no-unfold",
+            "--no-close",
+            "--no-seal",
+            "--no-inverted-fills",
+            "--no-untangle",
+        ];
         let given = valued.iter().find(|o| a.value(o).is_some()).or(switches.iter().find(|o| a.switch(o)));
         if let Some(opt) = given {
             return Err(Error::Usage(format!(

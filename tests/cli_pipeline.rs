@@ -1060,6 +1060,17 @@ fn reconstruct_warns_when_most_points_are_no_faces_corner() {
         String::from_utf8_lossy(&ok(&["reconstruct", &scattered, "-o", &s.p("a.obj")]).stderr).to_string();
     assert!(err.contains("warning") && err.contains("points are corners of a face"), "{err}");
     assert!(err.contains("scattered.xyz"), "{err}");
+    assert!(!err.contains("--per-point"), "{err}");
+    // With a candidate budget the shipped weights never saw, the warning names it
+    // (session 30's audit: `--per-point 64` kept 124 of a cloud's 1,848 faces).
+    let err = String::from_utf8_lossy(
+        &ok(&["reconstruct", &scattered, "-o", &s.p("a.obj"), "--per-point", "64"]).stderr,
+    )
+    .to_string();
+    assert!(
+        err.contains("points are corners of a face") && err.contains("--per-point 64 (default 32)"),
+        "{err}"
+    );
     let quad = s.p("quad.xyz");
     ok(&["synth", "--shape", "cube_sphere", "--seed", "1", "--noise", "0", "-o", &quad]);
     let err = String::from_utf8_lossy(&ok(&["reconstruct", &quad, "-o", &s.p("b.obj")]).stderr).to_string();

@@ -435,8 +435,9 @@ pub fn run(argv: &[String]) -> Result<()> {
              the surface was not found; if the points are not the vertices of a quad mesh (a raw scan), \
              resample them first: the method picks faces among the input points (README, \"What the \
              input must be\"); if they are, quads elongated beyond about 7:1 are a known limit \
-             (README, \"Where it fails\")\n",
-            input.display()
+             (README, \"Where it fails\"){}\n",
+            input.display(),
+            off_default_candidates(&cfg.candidates)
         ));
     }
     crate::output::stderr(&format!(
@@ -448,8 +449,10 @@ pub fn run(argv: &[String]) -> Result<()> {
 }
 
 /// When `--k` or `--per-point` differ from the defaults the shipped weights were trained
-/// with, a clause saying so for the no-faces warning (session 24's audit: `--per-point 64`
-/// or `--k 3` alone gave no faces, and the warning blamed the input); empty otherwise.
+/// with, a clause saying so for the no-faces and the few-corners warnings (session 24's
+/// audit: `--per-point 64` or `--k 3` alone gave no faces, and the warning blamed the
+/// input; session 30's: `--per-point 64` gave 124 faces where 32 gives 1,848, and the
+/// few-corners warning did not name it); empty otherwise.
 fn off_default_candidates(c: &point2quad::pipeline::candidates::CandidateConfig) -> String {
     let d = point2quad::pipeline::candidates::CandidateConfig::default();
     let mut off = Vec::new();

@@ -18,6 +18,10 @@
 # the classifier trains on first draws only (`train --draws first`), the rounds on
 # every draw (`refine --draws all`), so they learn from the classifier's scores on
 # noise points it was not trained on.
+# `--corner-start index` (session 30) rebuilds the shipped weights as they were trained:
+# candidates started at their smallest index, never a noise point here. The order-free
+# default (`least`) was trained as arm G and did not pass its rule (docs/EXPERIMENTS.md,
+# "Session 30"); reconstruct reads points in coordinate order either way.
 set -euo pipefail
 BIN=${1:-target/release/point2quad}
 EPOCHS=${EPOCHS:-40}
@@ -28,7 +32,7 @@ if [ ! -f "$DATA/index.txt" ]; then
   if [ -d ../shared/data/quads/train ]; then MESHES=(--meshes ../shared/data/quads/train --coarsen 0.5);
   else echo "train: ../shared/data/quads/train not found: synthetic data only"; fi
   rm -rf "$DATA"
-  "$BIN" dataset --out "$DATA" --synthetic 80 "${MESHES[@]}" --noise 0.1 --seed 7 --noise-variants 3
+  "$BIN" dataset --out "$DATA" --synthetic 80 "${MESHES[@]}" --noise 0.1 --seed 7 --noise-variants 3 --corner-start index
 fi
 HOLD=()
 if [ -n "${HOLD_OUT:-}" ]; then

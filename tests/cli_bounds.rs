@@ -212,6 +212,38 @@ fn far_completion_adds_candidates_from_the_cli() {
     assert!(on.len() > off.len() + 100, "too little added: {} vs {}", on.len(), off.len());
 }
 
+/// `dataset --corner-start` (session 30): `least` is the default (byte-identical files),
+/// `index` gives other samples (the same candidates started elsewhere), anything else is
+/// a usage error naming the option.
+#[test]
+fn dataset_corner_start_is_an_option() {
+    let dir = Scratch::new("cli_dataset_corner_start");
+    let files = |start: Option<&str>| -> Vec<Vec<u8>> {
+        let out_dir = dir.p(&format!("ds{}", start.unwrap_or("default")));
+        let mut args = vec!["dataset", "--out", &out_dir, "--synthetic", "2", "--seed", "3"];
+        if let Some(s) = start {
+            args.extend(["--corner-start", s]);
+        }
+        let out = p2q(&args);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let mut paths: Vec<_> = std::fs::read_dir(&out_dir)
+            .expect("test: list")
+            .map(|e| e.expect("test: entry").path())
+            .filter(|p| p.extension().is_some_and(|x| x == "p2qs"))
+            .collect();
+        paths.sort();
+        paths.iter().map(|p| std::fs::read(p).expect("test: sample")).collect()
+    };
+    let (d, least, index) = (files(None), files(Some("least")), files(Some("index")));
+    assert_eq!(d.len(), 2);
+    assert_eq!(d, least, "the default is not least");
+    assert!(d.iter().zip(&index).all(|(a, b)| a != b && a.len() == b.len()));
+    let out = p2q(&["dataset", "--out", &dir.p("bad"), "--synthetic", "1", "--corner-start", "first"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--corner-start must be least or index"), "{err}");
+}
+
 /// `dataset --per-point` (session 27) sizes the samples' candidate budget as
 /// `reconstruct --per-point` does: more candidates per sample for a larger budget, never
 /// a lower coverage, and the default is 32 (its files are byte-identical to an explicit 32).

@@ -8,7 +8,8 @@ use std::process::Command;
 use point2quad::mesh::shapes;
 use point2quad::pipeline::candidates::{generate, CandidateConfig};
 use point2quad::pipeline::dataset::{
-    build_sample, encode_sample, label_candidates, load_sample, read_sample, stretch_mesh,
+    build_sample, build_sample_with, encode_sample, label_candidates, load_sample, read_sample, stretch_mesh,
+    CornerStart,
 };
 use point2quad::pipeline::features::{face_input, CONTEXT_DIM, F_INFO_DIM};
 use point2quad::pipeline::frame::Frame;
@@ -103,6 +104,17 @@ fn sample_layout_labels_and_determinism() {
     assert!(started_elsewhere > s.candidates.len() / 4, "{started_elsewhere} of {}", s.candidates.len());
     c.quads = s.candidates.clone();
     assert_eq!(s.features, face_input(&s.points, &c, true));
+    // `CornerStart::Index` (what the shipped weights were trained on, `make train`'s
+    // `--corner-start index`): the candidates exactly as `generate` gives them, smallest
+    // index first, with the same noise draws and labels by vertex set.
+    let old = build_sample_with("torus", &mesh, &noise, &cfg, CornerStart::Index, &mut Rng::new(7)).unwrap();
+    let g = generate(&s.points, &cfg).unwrap();
+    assert_eq!(old.points, s.points);
+    assert_eq!(old.candidates, g.quads);
+    assert!(old.candidates.iter().all(|q| q[0] == *q.iter().min().unwrap()));
+    assert_eq!(old.features, face_input(&s.points, &g, true));
+    assert_eq!(old.labels, s.labels);
+    assert_ne!(old.candidates, s.candidates);
     assert_eq!(s.labels, label_candidates(&s.candidates, &mesh.quads));
     assert!(s.positives() > 0 && s.coverage() > 0.0);
     // Same seed, same bytes; round trip through the format.

@@ -12,8 +12,8 @@ use point2quad::mesh::coarsen::{coarsen as coarsen_mesh, CoarsenConfig};
 use point2quad::mesh::poly::QuadMesh;
 use point2quad::pipeline::candidates::CandidateConfig;
 use point2quad::pipeline::dataset::{
-    build_sample, index_line, sample_rng, save_sample, stretch_mesh, synthetic_mesh_with_aspect, variant_rng,
-    EXTENSION, VARIANT_SEP,
+    build_sample_with, index_line, sample_rng, save_sample, stretch_mesh, synthetic_mesh_with_aspect,
+    variant_rng, CornerStart, EXTENSION, VARIANT_SEP,
 };
 use point2quad::pipeline::noise::NoiseConfig;
 use point2quad::{par, Error, Result};
@@ -74,6 +74,12 @@ OPTIONS:
     --far F           far completion in the candidates, as `reconstruct --far`
                       (0 to 64) [0]; a model trained on such data wants the same
                       value at reconstruct
+    --corner-start least|index
+                      where each candidate's corners start: at its corner of
+                      smallest coordinates, or at its smallest index, which here is
+                      never a noise point (noise points follow the mesh vertices),
+                      a cue no real cloud gives; the shipped weights were trained
+                      with index (`make train` asks for it) [least]
 
 At least one of --synthetic and --meshes is needed. A mesh that cannot be read (a
 folder or a broken link named like one too), is not pure-quad, has no faces, has a
@@ -179,11 +185,21 @@ pub fn run(argv: &[String]) -> Result<()> {
             "--stretch",
             "--min-aspect",
             "--noise-variants",
+            "--corner-start",
         ],
         switches: &["--bumpy"],
     };
     let args = Args::parse(CMD, argv, &spec)?;
     let bumpy = args.switch("--bumpy");
+    let start = match args.value("--corner-start") {
+        None | Some("least") => CornerStart::Least,
+        Some("index") => CornerStart::Index,
+        Some(other) => {
+            return Err(Error::Usage(format!(
+                "{CMD}: --corner-start must be least or index, got {other:?} (see `point2quad {CMD} --help`)"
+            )))
+        }
+    };
     let min_aspect: f64 = args.parsed_in(
         CMD,
         "--min-aspect",
@@ -377,7 +393,10 @@ pub fn run(argv: &[String]) -> Result<()> {
             Some(v) => (format!("{name}{VARIANT_SEP}{v}"), variant_rng(seed, k, v)),
             None => (name, rng),
         };
-        let sample = match (build_sample(&name, &mesh, &noise, &cand_cfg, &mut rng), jobs[k].mesh_path()) {
+        let sample = match (
+            build_sample_with(&name, &mesh, &noise, &cand_cfg, start, &mut rng),
+            jobs[k].mesh_path(),
+        ) {
             (Ok(s), _) => s,
             // A mesh file that loads but cannot make a sample (e.g. every face has zero
             // area, so no noise point can be placed) is skipped like any unusable file.

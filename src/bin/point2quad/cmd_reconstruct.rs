@@ -233,16 +233,9 @@ pub fn run(argv: &[String]) -> Result<()> {
             "--second-pass-tau",
             "--second-pass-cover",
         ];
-        let switches = [
-            "--no-rescue",
-            "--rescue-keep-parity",
-            "--no-unfold",
-            "--no-close",
-            "--no-seal",
-            "--no-inverted-fills",
-            "--no-untangle",
-        ];
-        let given = valued.iter().find(|o| a.value(o).is_some()).or(switches.iter().find(|o| a.switch(o)));
+        // Every switch but this one sets a post-process step.
+        let mut switches = SPEC.switches.iter().filter(|o| **o != "--no-postprocess");
+        let given = valued.iter().find(|o| a.value(o).is_some()).or(switches.find(|o| a.switch(o)));
         if let Some(opt) = given {
             return Err(Error::Usage(format!(
                 "{cmd}: {opt} sets a post-process step and has no effect with --no-postprocess; give one of them"

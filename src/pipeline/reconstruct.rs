@@ -139,7 +139,10 @@ pub struct ReconstructReport {
     pub timings: Vec<(&'static str, f64)>,
 }
 
-/// Point cloud → pure-quad manifold mesh with `model`.
+/// Point cloud → pure-quad manifold mesh with `model`. The order of `points` does not
+/// matter (since session 30): any order of the same points gives the same faces on the
+/// same points, and the same added vertices (up to which of a group of near-duplicates
+/// the faces use: the first given).
 ///
 /// # Errors
 /// `Error::InvalidInput` for fewer than 4 (distinct) points, non-finite coordinates

@@ -235,7 +235,7 @@ fn dataset_corner_start_is_an_option() {
         paths.iter().map(|p| std::fs::read(p).expect("test: sample")).collect()
     };
     let (d, least, index) = (files(None), files(Some("least")), files(Some("index")));
-    assert_eq!(d.len(), 2);
+    assert_eq!((d.len(), index.len()), (2, 2));
     assert_eq!(d, least, "the default is not least");
     assert!(d.iter().zip(&index).all(|(a, b)| a != b && a.len() == b.len()));
     let out = p2q(&["dataset", "--out", &dir.p("bad"), "--synthetic", "1", "--corner-start", "first"]);

@@ -416,10 +416,10 @@ fn merge_passes(
 /// A cloud made ready for the pipeline by [`prepare_cloud`].
 #[derive(Clone, Debug)]
 pub struct PreparedCloud {
-    /// Input index of each point the pipeline works on (the first of each group of
-    /// duplicates or near-duplicates; far outliers left out), in coordinate order (by x,
-    /// then y, then z; since session 30), so that no later stage depends on the input's
-    /// order.
+    /// Input index of each point the pipeline works on (the first in input order of each
+    /// group of duplicates or near-duplicates; far outliers left out), in coordinate order
+    /// (by x, then y, then z; since session 30: every step from the outliers on reads the
+    /// points in that order), so that no stage depends on the input's order.
     pub distinct: Vec<u32>,
     /// Those points, as given.
     pub uniq: Vec<[f64; 3]>,
@@ -468,7 +468,16 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
     // (5 copies of each point left a k = 20 search 4 distinct neighbours, and half the
     // faces of a cube were lost) and add nothing to the surface.
     Frame::fit(points)?;
+    // Nothing downstream may depend on the input's order (session 30: a shuffled cloud
+    // lost recall, as candidates' corners started at their smallest index and the
+    // network had learnt that noise points come last): the points are taken in
+    // coordinate order, and every later tie that falls by index falls by position.
     let mut distinct = distinct_points(points);
+    let key = |i: u32| points[i as usize].map(|c| c + 0.0);
+    distinct.sort_by(|a, b| {
+        let (p, q) = (key(*a), key(*b));
+        p[0].total_cmp(&q[0]).then(p[1].total_cmp(&q[1])).then(p[2].total_cmp(&q[2]))
+    });
     let too_few = |u: usize| {
         Error::invalid(format!(
             "point cloud has {u} distinct point(s) (of {}); at least 4 are needed for a quad",
@@ -479,13 +488,29 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
         return Err(too_few(distinct.len()));
     }
     // Far outliers (a stray point 1e10 away) would squeeze the rest of the cloud into
-    // a speck of the normalised frame, below f32 resolution: left out.
-    let far = far_outliers(&distinct.iter().map(|&i| points[i as usize]).collect::<Vec<_>>());
+    // a speck of the normalised frame, below f32 resolution: left out. Beyond 10⁴ times
+    // the 95th percentile of the distances from the median; and when more than 5% are
+    // strays (the percentile is then one of them) and they would leave most of the
+    // cloud below the frame's resolution, beyond 10⁴ times the median distance
+    // (session 30). A second object far away but resolved stays.
+    let mut far = far_outliers(&distinct.iter().map(|&i| points[i as usize]).collect::<Vec<_>>());
+    if far.is_empty() {
+        let all: Vec<[f64; 3]> = distinct.iter().map(|&i| points[i as usize]).collect();
+        let strays = far_outliers_beyond_median(&all);
+        if !strays.is_empty() && mostly_unresolved(&all)? {
+            far = strays;
+        }
+    }
     let (outliers, first_outlier) = (far.len(), far.iter().map(|&j| distinct[j] as usize).min());
     if !far.is_empty() {
+        let before = distinct.len();
         distinct = without(&distinct, &far);
         if distinct.len() < 4 {
-            return Err(too_few(distinct.len()));
+            return Err(Error::invalid(format!(
+                "point cloud: leaving out {outliers} far outlier(s) leaves {} of its {before} distinct \
+                 points; at least 4 are needed for a quad",
+                distinct.len()
+            )));
         }
     }
     let mut uniq: Vec<[f64; 3]> = distinct.iter().map(|&i| points[i as usize]).collect();
@@ -524,14 +549,25 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
     if merge_share > 0.0 {
         let roots = near_duplicate_roots_with(&knn, &reach, merge_share);
         if roots.iter().enumerate().any(|(i, &r)| r as usize != i) {
-            let keep: Vec<usize> = (0..roots.len()).filter(|&i| roots[i] as usize == i).collect();
+            // Each group keeps its first point in input order (its faces use it), listed
+            // where the group's root stands: in coordinate order.
+            let mut first = (0..roots.len()).collect::<Vec<usize>>();
+            for (i, &r) in roots.iter().enumerate() {
+                if distinct[i] < distinct[first[r as usize]] {
+                    first[r as usize] = i;
+                }
+            }
+            let mut keep: Vec<usize> =
+                (0..roots.len()).filter(|&i| roots[i] as usize == i).map(|r| first[r]).collect();
+            keep.sort_unstable();
             if keep.len() < 4 {
                 // Not "distinct": the points are distinct, the merge made them one.
                 return Err(Error::invalid(format!(
                     "point cloud: merging near-duplicates (points closer than {merge_share} times the \
                      distance to their 8th nearest other point) leaves {} of its {} distinct points; at \
                      least 4 are needed for a quad. Groups of 8 or fewer points far from the rest \
-                     merge this way; a merge share of 0 (`--merge-share 0`) merges exact duplicates only",
+                     merge this way; a merge share of 0 (`reconstruct --merge-share 0`) merges exact \
+                     duplicates only",
                     keep.len(),
                     roots.len()
                 )));
@@ -541,21 +577,6 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
             frame = Frame::fit(&uniq)?;
             local = frame.to_local_all(&uniq);
         }
-    }
-    // Nothing downstream may depend on the input's order (session 30: a shuffled cloud
-    // lost recall, as candidates' corners started at their smallest index and the
-    // network had learnt that noise points come last): the points are taken in
-    // coordinate order, and every later tie that falls by index falls by position.
-    let key = |i: u32| points[i as usize].map(|c| c + 0.0);
-    let by_coords = |a: &u32, b: &u32| {
-        let (p, q) = (key(*a), key(*b));
-        p[0].total_cmp(&q[0]).then(p[1].total_cmp(&q[1])).then(p[2].total_cmp(&q[2]))
-    };
-    if !distinct.windows(2).all(|w| by_coords(&w[0], &w[1]).is_lt()) {
-        distinct.sort_by(by_coords);
-        uniq = distinct.iter().map(|&i| points[i as usize]).collect();
-        frame = Frame::fit(&uniq)?;
-        local = frame.to_local_all(&uniq);
     }
     let duplicates = points.len() - distinct.len() - outliers - unresolved;
     Ok(PreparedCloud {
@@ -600,16 +621,44 @@ fn check_probabilities(k: usize, p: &[f32]) -> Result<()> {
 pub const OUTLIER_RADII: f64 = 1e4;
 
 /// Indices of the far outliers of `points`: farther from the coordinate-wise median than
-/// [`OUTLIER_RADII`] times the median of all points' distances from it. A quad cannot
-/// join such a point to the rest (edge ratios below 1e-4), and normalising the cloud
-/// with it would leave the rest below f32 resolution. The median, not a high percentile
-/// (the 95th until session 30): up to half the points may be strays (a cloud with 36
-/// points at 1e9 beside 640 on a torus lost the torus to them). Empty when that median
-/// is 0 (most points identical) or for fewer than 5 points (none can go: 4 are needed).
+/// [`OUTLIER_RADII`] times the 95th percentile of all points' distances from it. A quad
+/// cannot join such a point to the rest (edge ratios below 1e-4), and normalising the
+/// cloud with it would leave the rest below f32 resolution. Empty when that percentile
+/// is 0 (most points identical) or for fewer than 20 points (no bulk to speak of).
+/// More than 5% of strays hide behind the percentile: [`far_outliers_beyond_median`].
 pub fn far_outliers(points: &[[f64; 3]]) -> Vec<usize> {
-    if points.len() < MIN_POINTS_FOR_OUTLIERS {
+    if points.len() < 20 {
         return Vec::new();
     }
+    beyond_quantile(points, 95)
+}
+
+/// The points farther from the coordinate-wise median than [`OUTLIER_RADII`] times the
+/// median of all points' distances from it: up to half the points may be such strays
+/// (session 30: 36 points at 1e9 beside 640 on a torus hid behind [`far_outliers`]'s
+/// percentile and took the torus's faces). `prepare_cloud` leaves them out only when
+/// the percentile rule finds none and they would leave most of the cloud below the
+/// frame's resolution, so a second object far away but resolved stays. Empty for fewer
+/// than 5 points or a median distance of 0.
+pub fn far_outliers_beyond_median(points: &[[f64; 3]]) -> Vec<usize> {
+    if points.len() < 5 {
+        return Vec::new();
+    }
+    beyond_quantile(points, 50)
+}
+
+/// Whether most of `points` (distinct, finite) would be unresolved in their frame:
+/// their 8 nearest other points within [`UNRESOLVED_SHARE`] of its radius.
+fn mostly_unresolved(points: &[[f64; 3]]) -> Result<bool> {
+    let local = Frame::fit(points)?.to_local_all(points);
+    let knn = crate::pipeline::candidates::knn_table(&local, NEAR_K);
+    let lost = reach_of(&knn, local.len()).iter().filter(|&&r| (r as f64) < UNRESOLVED_SHARE).count();
+    Ok(2 * lost > points.len())
+}
+
+/// The points farther from the coordinate-wise median than [`OUTLIER_RADII`] times the
+/// `percent`-th percentile of the distances from it (none when that is 0).
+fn beyond_quantile(points: &[[f64; 3]], percent: usize) -> Vec<usize> {
     // In raw coordinates, with a scaled norm: squares overflow at 1e200 and vanish at
     // 1e-200 (a bulk at 1 beside a point at 1e200 is both). A difference that
     // overflows is an infinite distance.
@@ -631,16 +680,13 @@ pub fn far_outliers(points: &[[f64; 3]]) -> Vec<usize> {
     };
     let d: Vec<f64> = points.iter().map(norm).collect();
     let mut sorted = d.clone();
-    let mid = sorted.len() / 2;
-    let r50 = *sorted.select_nth_unstable_by(mid, f64::total_cmp).1;
-    if r50 <= 0.0 {
+    let at = (sorted.len() * percent) / 100;
+    let r = *sorted.select_nth_unstable_by(at, f64::total_cmp).1;
+    if r <= 0.0 {
         return Vec::new();
     }
-    (0..d.len()).filter(|&i| d[i] > OUTLIER_RADII * r50).collect()
+    (0..d.len()).filter(|&i| d[i] > OUTLIER_RADII * r).collect()
 }
-
-/// Clouds with fewer points have no far outliers ([`far_outliers`]).
-pub const MIN_POINTS_FOR_OUTLIERS: usize = 5;
 
 /// Near-duplicate groups of a normalised cloud with no exact duplicates: `roots[i]` is
 /// the smallest index of the group of point `i`. Points `i` and `j` join when `j` is

@@ -442,8 +442,8 @@ pub fn run(argv: &[String]) -> Result<()> {
     Ok(())
 }
 
-/// When `--k` or `--per-point` differ from the defaults the shipped weights were trained
-/// with, a clause saying so for the no-faces and the few-corners warnings (session 24's
+/// When `--k`, `--per-point` or `--far` differ from the defaults the shipped weights were
+/// trained with, a clause saying so for the no-faces and the few-corners warnings (session 24's
 /// audit: `--per-point 64` or `--k 3` alone gave no faces, and the warning blamed the
 /// input; session 30's: `--per-point 64` gave 124 faces where 32 gives 1,848, and the
 /// few-corners warning did not name it); empty otherwise.

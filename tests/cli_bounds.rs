@@ -212,32 +212,40 @@ fn far_completion_adds_candidates_from_the_cli() {
     assert!(on.len() > off.len() + 100, "too little added: {} vs {}", on.len(), off.len());
 }
 
+/// Sample files of a dataset: (file name, bytes), sorted by name.
+type Files = Vec<(std::path::PathBuf, Vec<u8>)>;
+
+/// `dataset --synthetic 2 --seed 3` into a folder of `dir` named after `value`, with
+/// `option value` when `value` is given: the folder and its sample files.
+fn small_dataset(dir: &Scratch, option: &str, value: Option<&str>) -> (String, Files) {
+    let out_dir = dir.p(&format!("ds{}", value.unwrap_or("default")));
+    let mut args = vec!["dataset", "--out", &out_dir, "--synthetic", "2", "--seed", "3"];
+    if let Some(v) = value {
+        args.extend([option, v]);
+    }
+    let out = p2q(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let mut files: Files = std::fs::read_dir(&out_dir)
+        .expect("test: list")
+        .map(|e| e.expect("test: entry").path())
+        .filter(|p| p.extension().is_some_and(|x| x == "p2qs"))
+        .map(|p| (p.file_name().expect("test: name").into(), std::fs::read(&p).expect("test: sample")))
+        .collect();
+    files.sort();
+    (out_dir, files)
+}
+
 /// `dataset --corner-start` (session 30): `least` is the default (byte-identical files),
 /// `index` gives other samples (the same candidates started elsewhere), anything else is
 /// a usage error naming the option.
 #[test]
 fn dataset_corner_start_is_an_option() {
     let dir = Scratch::new("cli_dataset_corner_start");
-    let files = |start: Option<&str>| -> Vec<Vec<u8>> {
-        let out_dir = dir.p(&format!("ds{}", start.unwrap_or("default")));
-        let mut args = vec!["dataset", "--out", &out_dir, "--synthetic", "2", "--seed", "3"];
-        if let Some(s) = start {
-            args.extend(["--corner-start", s]);
-        }
-        let out = p2q(&args);
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-        let mut paths: Vec<_> = std::fs::read_dir(&out_dir)
-            .expect("test: list")
-            .map(|e| e.expect("test: entry").path())
-            .filter(|p| p.extension().is_some_and(|x| x == "p2qs"))
-            .collect();
-        paths.sort();
-        paths.iter().map(|p| std::fs::read(p).expect("test: sample")).collect()
-    };
+    let files = |start: Option<&str>| small_dataset(&dir, "--corner-start", start).1;
     let (d, least, index) = (files(None), files(Some("least")), files(Some("index")));
     assert_eq!((d.len(), index.len()), (2, 2));
     assert_eq!(d, least, "the default is not least");
-    assert!(d.iter().zip(&index).all(|(a, b)| a != b && a.len() == b.len()));
+    assert!(d.iter().zip(&index).all(|(a, b)| a.0 == b.0 && a.1 != b.1 && a.1.len() == b.1.len()));
     let out = p2q(&["dataset", "--out", &dir.p("bad"), "--synthetic", "1", "--corner-start", "first"]);
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
@@ -250,15 +258,8 @@ fn dataset_corner_start_is_an_option() {
 #[test]
 fn dataset_per_point_sets_the_budget() {
     let dir = Scratch::new("cli_dataset_per_point");
-    type Files = Vec<(std::path::PathBuf, Vec<u8>)>;
     let index = |pp: Option<&str>| -> (Files, Vec<(usize, f64)>) {
-        let out_dir = dir.p(&format!("ds{}", pp.unwrap_or("default")));
-        let mut args = vec!["dataset", "--out", &out_dir, "--synthetic", "2", "--seed", "3"];
-        if let Some(pp) = pp {
-            args.extend(["--per-point", pp]);
-        }
-        let out = p2q(&args);
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let (out_dir, files) = small_dataset(&dir, "--per-point", pp);
         let text = std::fs::read_to_string(format!("{out_dir}/index.txt")).expect("test: index written");
         let rows = text
             .lines()
@@ -268,13 +269,6 @@ fn dataset_per_point_sets_the_budget() {
                 (c[2].parse().expect("test: candidates"), c[4].parse().expect("test: coverage"))
             })
             .collect();
-        let mut files: Files = std::fs::read_dir(&out_dir)
-            .expect("test: list")
-            .map(|e| e.expect("test: entry").path())
-            .filter(|p| p.extension().is_some_and(|x| x == "p2qs"))
-            .map(|p| (p.file_name().expect("test: name").into(), std::fs::read(&p).expect("test: sample")))
-            .collect();
-        files.sort();
         (files, rows)
     };
     let (d, default) = index(None);

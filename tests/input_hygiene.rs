@@ -183,14 +183,20 @@ fn near_copies_give_the_faces_of_the_cloud() {
     assert_ne!(m0.quads, clean.quads);
 }
 
-/// A far outlier is left out (reported with its input index) and the rest gives the
-/// faces it gives alone; the outlier stays in the output as an isolated vertex.
-#[test]
-fn a_far_outlier_leaves_the_rest_unchanged() {
+/// The outlier tests' bulk: a quad sphere's vertices, the settings, and its faces alone.
+fn sphere_alone() -> (Vec<[f64; 3]>, ReconstructConfig, point2quad::mesh::poly::QuadMesh) {
     let pts = shapes::cube_sphere(5).vertices;
     let cfg = ReconstructConfig { threshold: 0.3, ..Default::default() };
     let alone = reconstruct(&pts, model(), &cfg).expect("alone");
     assert!(!alone.quads.is_empty());
+    (pts, cfg, alone)
+}
+
+/// A far outlier is left out (reported with its input index) and the rest gives the
+/// faces it gives alone; the outlier stays in the output as an isolated vertex.
+#[test]
+fn a_far_outlier_leaves_the_rest_unchanged() {
+    let (pts, cfg, alone) = sphere_alone();
     for far in [1e9, 1e40, -1e300] {
         let mut with = pts.clone();
         with.insert(3, [far, 0.5, far.abs().sqrt()]);
@@ -209,10 +215,7 @@ fn a_far_outlier_leaves_the_rest_unchanged() {
 /// the faces it gives alone.
 #[test]
 fn a_third_of_the_cloud_as_strays_leaves_the_rest_unchanged() {
-    let pts = shapes::cube_sphere(5).vertices;
-    let cfg = ReconstructConfig { threshold: 0.3, ..Default::default() };
-    let alone = reconstruct(&pts, model(), &cfg).expect("alone");
-    assert!(!alone.quads.is_empty());
+    let (pts, cfg, alone) = sphere_alone();
     let mut rng = Rng::new(5);
     let k = pts.len() / 2 - 1;
     let mut with = pts.clone();

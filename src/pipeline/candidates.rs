@@ -1072,6 +1072,11 @@ fn vertex_set(q: &[u32; 4]) -> [u32; 4] {
 /// Rotates a cyclic quad so its smallest index comes first (direction kept).
 pub(crate) fn canonical(q: [u32; 4]) -> [u32; 4] {
     let s = (0..4).min_by_key(|&i| q[i]).expect("internal error: 4 corners");
+    started_at(q, s)
+}
+
+/// The cyclic quad `q` started at its corner `s` (direction kept).
+fn started_at(q: [u32; 4], s: usize) -> [u32; 4] {
     [q[s], q[(s + 1) % 4], q[(s + 2) % 4], q[(s + 3) % 4]]
 }
 
@@ -1218,7 +1223,7 @@ pub fn start_at_least_corner(points: &[[f32; 3]], q: [u32; 4]) -> [u32; 4] {
     let s = (0..4)
         .min_by(|&a, &b| coord_cmp(points[q[a] as usize], points[q[b] as usize]).then(q[a].cmp(&q[b])))
         .expect("internal error: 4 corners");
-    [q[s], q[(s + 1) % 4], q[(s + 2) % 4], q[(s + 3) % 4]]
+    started_at(q, s)
 }
 
 /// Lexicographic order of two points' coordinates: the tie-break that does not depend

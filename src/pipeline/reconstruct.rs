@@ -493,12 +493,20 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
     // strays (the percentile is then one of them) and they would leave most of the
     // cloud below the frame's resolution, beyond 10⁴ times the median distance
     // (session 30). A second object far away but resolved stays.
-    let mut far = far_outliers(&distinct.iter().map(|&i| points[i as usize]).collect::<Vec<_>>());
+    let (mut uniq, mut frame, mut local) = framed(points, &distinct)?;
+    let mut far = far_outliers(&uniq);
+    // The neighbour table and the unresolved points of the cloud as it stands, when the
+    // median rule needed them and cut nothing (then they are the ones used below).
+    let mut resolved = None;
     if far.is_empty() {
-        let all: Vec<[f64; 3]> = distinct.iter().map(|&i| points[i as usize]).collect();
-        let strays = far_outliers_beyond_median(&all);
-        if !strays.is_empty() && mostly_unresolved(&all)? {
-            far = strays;
+        let strays = far_outliers_beyond_median(&uniq);
+        if !strays.is_empty() {
+            let (knn, reach, lost) = resolution(&local);
+            if 2 * lost.len() > local.len() {
+                far = strays;
+            } else {
+                resolved = Some((knn, reach, lost));
+            }
         }
     }
     let (outliers, first_outlier) = (far.len(), far.iter().map(|&j| distinct[j] as usize).min());
@@ -512,15 +520,13 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
                 distinct.len()
             )));
         }
+        (uniq, frame, local) = framed(points, &distinct)?;
     }
-    let mut uniq: Vec<[f64; 3]> = distinct.iter().map(|&i| points[i as usize]).collect();
-    let mut frame = Frame::fit(&uniq)?;
-    let mut local = frame.to_local_all(&uniq);
-    let knn = crate::pipeline::candidates::knn_table(&local, NEAR_K);
-    let reach = reach_of(&knn, local.len());
-    let lost: Vec<usize> = (0..local.len()).filter(|&i| (reach[i] as f64) < UNRESOLVED_SHARE).collect();
+    let (mut knn, mut reach, lost) = match resolved {
+        Some(r) => r,
+        None => resolution(&local),
+    };
     let (unresolved, first_unresolved) = (lost.len(), lost.iter().map(|&i| distinct[i] as usize).min());
-    let (mut knn, mut reach) = (knn, reach);
     if !lost.is_empty() {
         // Left out like far outliers: at f32 resolution their positions collapse onto
         // a few values, and the faces proposed over them are wrong (inverted, folded).
@@ -537,9 +543,7 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
                 first_unresolved.unwrap_or(0)
             )));
         }
-        uniq = distinct.iter().map(|&i| points[i as usize]).collect();
-        frame = Frame::fit(&uniq)?;
-        local = frame.to_local_all(&uniq);
+        (uniq, frame, local) = framed(points, &distinct)?;
         // The neighbour table serves the near-duplicate merge alone.
         if merge_share > 0.0 {
             knn = crate::pipeline::candidates::knn_table(&local, NEAR_K);
@@ -573,9 +577,7 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
                 )));
             }
             distinct = keep.iter().map(|&i| distinct[i]).collect();
-            uniq = distinct.iter().map(|&i| points[i as usize]).collect();
-            frame = Frame::fit(&uniq)?;
-            local = frame.to_local_all(&uniq);
+            (uniq, frame, local) = framed(points, &distinct)?;
         }
     }
     let duplicates = points.len() - distinct.len() - outliers - unresolved;
@@ -647,13 +649,25 @@ pub fn far_outliers_beyond_median(points: &[[f64; 3]]) -> Vec<usize> {
     beyond_quantile(points, 50)
 }
 
-/// Whether most of `points` (distinct, finite) would be unresolved in their frame:
-/// their 8 nearest other points within [`UNRESOLVED_SHARE`] of its radius.
-fn mostly_unresolved(points: &[[f64; 3]]) -> Result<bool> {
-    let local = Frame::fit(points)?.to_local_all(points);
-    let knn = crate::pipeline::candidates::knn_table(&local, NEAR_K);
-    let lost = reach_of(&knn, local.len()).iter().filter(|&&r| (r as f64) < UNRESOLVED_SHARE).count();
-    Ok(2 * lost > points.len())
+/// Points as given, their normalising frame, and their coordinates in it.
+type Framed = (Vec<[f64; 3]>, Frame, Vec<[f32; 3]>);
+
+/// The points `distinct` (input indices) of `points`, their normalising frame and their
+/// coordinates in it.
+fn framed(points: &[[f64; 3]], distinct: &[u32]) -> Result<Framed> {
+    let uniq: Vec<[f64; 3]> = distinct.iter().map(|&i| points[i as usize]).collect();
+    let frame = Frame::fit(&uniq)?;
+    let local = frame.to_local_all(&uniq);
+    Ok((uniq, frame, local))
+}
+
+/// A normalised cloud's [`NEAR_K`]-nearest table, each point's reach, and the points
+/// the frame does not resolve: their reach under [`UNRESOLVED_SHARE`] of its radius.
+fn resolution(local: &[[f32; 3]]) -> (crate::spatial::kdtree::KnnTable, Vec<f32>, Vec<usize>) {
+    let knn = crate::pipeline::candidates::knn_table(local, NEAR_K);
+    let reach = reach_of(&knn, local.len());
+    let lost = (0..local.len()).filter(|&i| (reach[i] as f64) < UNRESOLVED_SHARE).collect();
+    (knn, reach, lost)
 }
 
 /// The points farther from the coordinate-wise median than [`OUTLIER_RADII`] times the

@@ -196,13 +196,8 @@ pub fn run(argv: &[String]) -> Result<()> {
     pp.rescue.enabled = !a.switch("--no-rescue");
     pp.rescue.keep_parity = a.switch("--rescue-keep-parity");
     // Settings of a step that is turned off would be ignored without a word.
-    if !pp.rescue.enabled && pp.rescue.keep_parity {
-        return Err(Error::Usage(format!(
-            "{cmd}: --rescue-keep-parity has no effect with --no-rescue; give one of them"
-        )));
-    }
-    for opt in ["--rescue-min-prob", "--rescue-lone"] {
-        if !pp.rescue.enabled && a.value(opt).is_some() {
+    for opt in ["--rescue-min-prob", "--rescue-lone", "--rescue-keep-parity"] {
+        if !pp.rescue.enabled && (a.value(opt).is_some() || a.switch(opt)) {
             return Err(Error::Usage(format!(
                 "{cmd}: {opt} has no effect with --no-rescue; give one of them"
             )));

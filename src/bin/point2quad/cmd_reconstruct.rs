@@ -23,10 +23,11 @@ INPUT is a point cloud (.xyz/.txt/.pts/.csv, .ply, .obj or .off; only positions 
 read; a first line of column names is a header: columns named x, y, z are read
 wherever they are, else the first three), at any scale, pose or offset. The output
 mesh's vertices are the input points, written back exactly and in input order (points
-no face uses stay as isolated vertices), then any vertices hole filling added. Duplicate and near-duplicate points count once (faces use the first of
-each group), and far outliers (more than 10,000 times the cloud's radius away) are
-left out; both are reported and stay in the output as isolated vertices. The order of
-the points does not matter: any order gives the same faces.
+no face uses stay as isolated vertices), then any vertices hole filling added.
+Duplicate and near-duplicate points count once (faces use the first of each group),
+and far outliers (more than 10,000 times the cloud's radius away) are left out; both
+are reported and stay in the output as isolated vertices. The order of the points does
+not matter: any order gives the same faces.
 
 OPTIONS:
     -o, --output OUT      output mesh; format from the extension (required)

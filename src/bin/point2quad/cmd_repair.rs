@@ -18,15 +18,16 @@ USAGE:
 
 MESH is an .obj, .off or .ply file whose faces may overlap, repeat or be non-manifold.
 First, quads that repeat a vertex (\"degenerate\") or have no area (\"zero-area\": two
-corners at one position, all four at one point, or all on one line; within 1e-12 of the
-quad's size) are dropped and counted. Steps: (a) the paper's filter deletes the worst-scoring face while any face scores above
-the limit (score (boundary edges + 1)(10 non-manifold edges + 1)); (b) the survivors are
-inserted by priority, refusing any face that would break manifoldness (opposite-oriented
-patches are flipped to agree); (c) greedy hole filling, then what is left: two loops with
-an odd number of edges (which quads cannot close) are merged by removing the face or two
-between them, and loops of at most 40 edges are split into quads over their own vertices.
-Closed components are then turned outward. Output vertices are the input's, in order and unchanged, plus any the hole
-filling adds.
+corners at one position, all four at one point, or all on one line; within 1e-12 of
+the quad's size) are dropped and counted. Steps: (a) the paper's filter deletes the
+worst-scoring face while any face scores above the limit (score (boundary edges +
+1)(10 non-manifold edges + 1)); (b) the survivors are inserted by priority, refusing
+any face that would break manifoldness (opposite-oriented patches are flipped to
+agree); (c) greedy hole filling, then what is left: two loops with an odd number of
+edges (which quads cannot close) are merged by removing the face or two between them,
+and loops of at most 40 edges are split into quads over their own vertices. Closed
+components are then turned outward. Output vertices are the input's, in order and
+unchanged, plus any the hole filling adds.
 
 OPTIONS:
     -o FILE                output mesh (.obj .ply .off), written atomically

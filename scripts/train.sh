@@ -21,7 +21,8 @@
 # `--corner-start index` (session 30) rebuilds the shipped weights as they were trained:
 # candidates started at their smallest index, never a noise point here. The order-free
 # default (`least`) was trained as arm G and did not pass its rule (docs/EXPERIMENTS.md,
-# "Session 30"); reconstruct reads points in coordinate order either way.
+# "Session 30"), nor on fresh seeds as arm G2 ("Session 31"); reconstruct reads points in
+# coordinate order either way.
 set -euo pipefail
 BIN=${1:-target/release/point2quad}
 EPOCHS=${EPOCHS:-40}

@@ -1215,10 +1215,10 @@ const FAR_MIN_COS: f32 = 0.8;
 
 /// The cyclic quad `q` (direction kept) rotated to start at its corner of smallest
 /// coordinates (by x, then y, then z; among equal ones the smallest index). A start that
-/// does not depend on how the points are numbered: training samples use it (their noise
-/// points come after the mesh vertices), and `reconstruct`, whose points are numbered
-/// in coordinate order, gets the same start from [`canonical`] (up to points whose f32
-/// coordinates round to equal values).
+/// does not depend on how the points are numbered: `dataset`'s default (its samples'
+/// noise points come after the mesh vertices), while `reconstruct`, whose points are
+/// numbered in coordinate order, gets the same start from a candidate's smallest index
+/// (up to points whose f32 coordinates round to equal values).
 pub fn start_at_least_corner(points: &[[f32; 3]], q: [u32; 4]) -> [u32; 4] {
     let s = (0..4)
         .min_by(|&a, &b| coord_cmp(points[q[a] as usize], points[q[b] as usize]).then(q[a].cmp(&q[b])))

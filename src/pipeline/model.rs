@@ -82,7 +82,7 @@ pub struct ModelConfig {
     /// many clouds fit none of them well, which the point encoder's features show most
     /// (docs/EXPERIMENTS.md, sessions 27 and 28). Up to 131,072 candidates are scored in
     /// one batch; larger clouds take the statistics of a spread sample of them
-    /// ([`Model::score_rows`]). `cloud_batch_stats = true` in the text form,
+    /// (`Model::score_rows`, private). `cloud_batch_stats = true` in the text form,
     /// written only when set (files without it read the running averages).
     pub cloud_batch_stats: bool,
 }

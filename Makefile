@@ -3,13 +3,13 @@ CARGO ?= cargo
 BIN := target/release/point2quad
 WASM_TARGET := wasm32-unknown-unknown
 
-.PHONY: all build demo train quality test fmt fmt-check clippy wasm nodefault test-debug test-heavy bench coverage clean help
+.PHONY: all build demo train quality test fmt fmt-check clippy doc wasm nodefault test-debug test-heavy bench coverage clean help
 
 all: build
 
 help:
 	@echo "make demo   - build, reconstruct/process a shipped example, write results under out/demo"
-	@echo "make test   - fmt check, clippy -D warnings, no-default-features + wasm builds, all tests"
+	@echo "make test   - fmt check, clippy -D warnings, rustdoc -D warnings, no-default-features + wasm builds, all tests"
 	@echo "make bench  - benchmarks (one 'bench <name> <value> <unit>' line per figure)"
 	@echo "make train  - rebuild the shipped weights (scripts/train.sh: data, seed, epochs)"
 	@echo "make quality - reconstruct every ../shared/data/quads/eval mesh (10% noise and clean) and tabulate metrics"
@@ -29,7 +29,7 @@ quality: build
 	./scripts/quality_table.sh $(BIN) ../shared/data/quads/eval 0.1
 	./scripts/quality_table.sh $(BIN) ../shared/data/quads/eval 0
 
-test: fmt-check clippy nodefault wasm test-debug test-heavy
+test: fmt-check clippy doc nodefault wasm test-debug test-heavy
 	@echo "make test: all checks passed"
 
 fmt:
@@ -41,6 +41,10 @@ fmt-check:
 clippy:
 	$(CARGO) clippy --all-targets -- -D warnings
 	$(CARGO) clippy --lib --no-default-features -- -D warnings
+
+# The library's rustdoc with warnings as errors (broken or private intra-doc links).
+doc:
+	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --no-deps --lib
 
 nodefault:
 	$(CARGO) build --lib --no-default-features

@@ -79,6 +79,31 @@ pub fn num_threads() -> usize {
     }
 }
 
+/// Sizes the global pool to `n` worker threads (the CLI's `--threads`), as
+/// `RAYON_NUM_THREADS` would; call it before any parallel work. Returns the number of
+/// threads that will run: `n`, or 1 in a build without the `parallel` feature.
+///
+/// # Errors
+/// `Usage` for `n` = 0, or when the pool was already built (by earlier parallel work
+/// or an earlier call).
+pub fn set_threads(n: usize) -> crate::Result<usize> {
+    if n == 0 {
+        return Err(crate::Error::Usage("--threads must be at least 1".into()));
+    }
+    #[cfg(feature = "parallel")]
+    {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .map_err(|e| crate::Error::Usage(format!("cannot set the thread count to {n}: {e}")))?;
+        Ok(n)
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        Ok(1)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #[test]

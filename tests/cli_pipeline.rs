@@ -1434,3 +1434,80 @@ fn draws_follow_held_out_copies_and_sample_names_are_unique() {
     // Same stem: the extension tells them apart first, then a number.
     assert_eq!(sample_files(&out_dir), vec!["x_2_obj.p2qs".to_string(), "x_2_obj_2.p2qs".to_string()]);
 }
+
+/// The files of `dir` (name, bytes), sorted by name.
+fn folder_bytes(dir: &str) -> Vec<(String, Vec<u8>)> {
+    let mut v: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| {
+            let e = e.unwrap();
+            (e.file_name().to_string_lossy().into_owned(), std::fs::read(e.path()).unwrap())
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn threads_option_sizes_the_pool_and_changes_no_result() {
+    let s = Scratch::new("threads");
+    let meshes = s.p("meshes");
+    write_meshes(&meshes);
+    // dataset, train (with its checkpoint), refine and reconstruct on 1 and 3 threads:
+    // the same bytes, and reconstruct reports the pool it ran on.
+    let mut runs = Vec::new();
+    for t in ["1", "3"] {
+        let (data, model, rounds, mesh) = (
+            s.p(&format!("d{t}")),
+            s.p(&format!("m{t}.p2qm")),
+            s.p(&format!("r{t}.p2qm")),
+            s.p(&format!("o{t}.obj")),
+        );
+        ok(&["dataset", "--meshes", &meshes, "--out", &data, "--seed", "3", "--threads", t]);
+        ok(&[
+            "train",
+            "--data",
+            &data,
+            "--out",
+            &model,
+            "--epochs",
+            "1",
+            "--val-fraction",
+            "0",
+            "--max-candidates",
+            "300",
+            &format!("--threads={t}"),
+        ]);
+        refine_tiny(&data, &model, &rounds, "1", &["--threads", t]);
+        let out =
+            ok(&["reconstruct", "--threads", t, &s.p("meshes/b_torus.obj"), "-o", &mesh, "--model", &rounds]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        let pool = if t == "1" { "1 thread)".to_string() } else { format!("{t} threads)") };
+        assert!(err.contains(&pool), "--threads {t}: {err}");
+        let files = [&model, &format!("{model}.ckpt"), &rounds, &mesh].map(|f| std::fs::read(f).unwrap());
+        runs.push((folder_bytes(&data), files));
+    }
+    assert!(!runs[0].0.is_empty());
+    assert!(runs[0] == runs[1], "a result depends on the thread count");
+    // Bad values are usage errors that name the option; nothing is written.
+    let out = s.p("bad.obj");
+    let cloud = s.p("meshes/a_sphere.obj");
+    for bad in [
+        &["--threads", "0"][..],
+        &["--threads", "x"],
+        &["--threads", "1025"],
+        &["--threads=-2"],
+        &["--threads"],
+    ] {
+        let mut args = vec!["reconstruct", cloud.as_str(), "-o", out.as_str()];
+        args.extend_from_slice(bad);
+        let err = fails(&args, 2);
+        assert!(err.contains("--threads"), "{bad:?}: {err}");
+    }
+    let err = fails(&["eval", &cloud, "--threads", "2", "--threads", "2"], 2);
+    assert!(err.contains("given twice"), "{err}");
+    assert!(!Path::new(&out).exists());
+    // After `--` it is a file name, not the option.
+    let err = fails(&["eval", "--", "--threads"], 2);
+    assert!(err.contains("--threads: unknown mesh format"), "{err}");
+}

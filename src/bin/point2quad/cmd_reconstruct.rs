@@ -431,9 +431,13 @@ pub fn run(argv: &[String]) -> Result<()> {
         ));
     }
     crate::output::stderr(&format!(
-        "reconstruct: time: {} (total {:.0} ms)\n",
+        "reconstruct: time: {} (total {:.0} ms, {})\n",
         stages.join(", "),
-        t0.elapsed().as_secs_f64() * 1e3
+        t0.elapsed().as_secs_f64() * 1e3,
+        match point2quad::par::num_threads() {
+            1 => "1 thread".to_string(),
+            n => format!("{n} threads"),
+        }
     ));
     Ok(())
 }

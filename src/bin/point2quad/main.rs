@@ -24,6 +24,10 @@ point2quad: point cloud -> pure-quad manifold mesh (Point2Quad, from scratch)
 USAGE:
     point2quad <COMMAND> [ARGS...]        (point2quad <COMMAND> --help for details)
 
+OPTIONS (every command):
+    --threads N  worker threads, 1 to 1024 [all cores, or RAYON_NUM_THREADS]; results
+                 do not depend on it
+
 COMMANDS:
     reconstruct  INPUT -o OUT.{obj,ply,off} [--model FILE] [--svg PREVIEW.svg] [--no-postprocess]
     candidates   INPUT -o CAND.txt         candidate quads, 4 zero-based indices per line
@@ -85,7 +89,28 @@ fn main() -> ExitCode {
         let _ = output::stdout(help);
         return ExitCode::SUCCESS;
     }
-    match run(rest) {
+    let rest = match take_threads(cmd, rest) {
+        Ok((threads, rest)) => {
+            if let Some(n) = threads {
+                match point2quad::par::set_threads(n) {
+                    Ok(m) if m != n => output::stderr(&format!(
+                        "point2quad {cmd}: note: --threads {n}: this build has no multi-threading (the `parallel` feature is off); it runs on {m}\n"
+                    )),
+                    Ok(_) => {}
+                    Err(e) => {
+                        output::stderr(&format!("point2quad {cmd}: error: {e}\n"));
+                        return ExitCode::from(2);
+                    }
+                }
+            }
+            rest
+        }
+        Err(e) => {
+            output::stderr(&format!("point2quad {cmd}: error: {e}\n"));
+            return ExitCode::from(2);
+        }
+    };
+    match run(&rest) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             output::stderr(&format!("point2quad {cmd}: error: {e}\n"));
@@ -95,4 +120,44 @@ fn main() -> ExitCode {
             }
         }
     }
+}
+
+/// Most worker threads `--threads` accepts.
+const MAX_THREADS: usize = 1024;
+
+/// Takes the global `--threads N` (or `--threads=N`) out of a command's arguments
+/// (up to a `--`, after which everything is positional).
+fn take_threads(cmd: &str, argv: &[String]) -> point2quad::Result<(Option<usize>, Vec<String>)> {
+    let usage = |m: String| point2quad::Error::Usage(format!("{cmd}: {m}"));
+    let mut threads = None;
+    let mut rest = Vec::with_capacity(argv.len());
+    let mut i = 0;
+    while i < argv.len() {
+        let a = &argv[i];
+        if a == "--" {
+            rest.extend(argv[i..].iter().cloned());
+            break;
+        }
+        let value = if a == "--threads" {
+            i += 1;
+            Some(argv.get(i).ok_or_else(|| usage("option --threads needs a value".into()))?.clone())
+        } else {
+            a.strip_prefix("--threads=").map(str::to_string)
+        };
+        match value {
+            Some(v) => {
+                if threads.is_some() {
+                    return Err(usage("option --threads given twice".into()));
+                }
+                let n: usize =
+                    v.trim().parse().ok().filter(|n| (1..=MAX_THREADS).contains(n)).ok_or_else(|| {
+                        usage(format!("--threads {v:?}: expected a whole number from 1 to {MAX_THREADS}"))
+                    })?;
+                threads = Some(n);
+            }
+            None => rest.push(a.clone()),
+        }
+        i += 1;
+    }
+    Ok((threads, rest))
 }

@@ -1075,6 +1075,16 @@ fn reconstruct_warns_when_most_points_are_no_faces_corner() {
     ok(&["synth", "--shape", "cube_sphere", "--seed", "1", "--noise", "0", "-o", &quad]);
     let err = String::from_utf8_lossy(&ok(&["reconstruct", &quad, "-o", &s.p("b.obj")]).stderr).to_string();
     assert!(!err.contains("warning"), "{err}");
+    // --quiet drops the summary and timing lines, never a warning, and changes no byte.
+    assert!(err.contains("reconstruct: time:"), "{err}");
+    let err = String::from_utf8_lossy(&ok(&["reconstruct", &quad, "-o", &s.p("q.obj"), "--quiet"]).stderr)
+        .to_string();
+    assert!(err.is_empty(), "--quiet: {err}");
+    assert_eq!(std::fs::read(s.p("b.obj")).unwrap(), std::fs::read(s.p("q.obj")).unwrap());
+    let err =
+        String::from_utf8_lossy(&ok(&["reconstruct", "--quiet", &scattered, "-o", &s.p("a.obj")]).stderr)
+            .to_string();
+    assert!(err.starts_with("reconstruct: warning:") && err.lines().count() == 1, "--quiet: {err}");
 }
 
 /// `dataset --noise-variants N`: the plain samples stay byte for byte, each gets N − 1
@@ -1449,7 +1459,7 @@ fn folder_bytes(dir: &str) -> Vec<(String, Vec<u8>)> {
 }
 
 #[test]
-fn threads_option_sizes_the_pool_and_changes_no_result() {
+fn threads_and_quiet_options_change_no_result() {
     let s = Scratch::new("threads");
     let meshes = s.p("meshes");
     write_meshes(&meshes);
@@ -1479,6 +1489,16 @@ fn threads_option_sizes_the_pool_and_changes_no_result() {
             &format!("--threads={t}"),
         ]);
         refine_tiny(&data, &model, &rounds, "1", &["--threads", t]);
+        if t == "1" {
+            // --quiet: no progress lines, the same weights.
+            let quiet = s.p("quiet.p2qm");
+            let args = ["--epochs", "1", "--val-fraction", "0", "--max-candidates", "300", "--quiet"];
+            let mut train = vec!["train", "--data", data.as_str(), "--out", quiet.as_str()];
+            train.extend_from_slice(&args);
+            let err = String::from_utf8_lossy(&ok(&train).stderr).to_string();
+            assert!(err.is_empty(), "train --quiet: {err}");
+            assert_eq!(std::fs::read(&quiet).unwrap(), std::fs::read(&model).unwrap());
+        }
         let out =
             ok(&["reconstruct", "--threads", t, &s.p("meshes/b_torus.obj"), "-o", &mesh, "--model", &rounds]);
         let err = String::from_utf8_lossy(&out.stderr);

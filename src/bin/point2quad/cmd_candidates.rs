@@ -135,7 +135,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         w.write_all(text.as_bytes()).map_err(|e| point2quad::Error::io(&output, e))
     })?;
     // Through `output::stderr`: `eprintln!` panics when stderr is a closed pipe.
-    crate::output::stderr(&format!(
+    crate::output::info(&format!(
         "candidates: {} points, {} candidates ({:.2} per point), read {:.3} s, generate {:.3} s -> {}\n",
         points.len(),
         cands.quads.len(),

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use crate::args::{Args, Spec};
-use crate::output::say;
+use crate::output::{note, say};
 use point2quad::io::mesh_io::read_mesh;
 use point2quad::mesh::coarsen::{coarsen as coarsen_mesh, CoarsenConfig};
 use point2quad::mesh::poly::QuadMesh;
@@ -351,7 +351,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     // A warning that a job is skipped, counted in the progress.
     let skip = |why: std::fmt::Arguments| {
         let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-        say!("[{n}/{total}] warning: skipping {why}");
+        note!("[{n}/{total}] warning: skipping {why}");
     };
     let results: Vec<Result<Option<(String, String)>>> = par::map(total, |k| {
         // A noise variant builds its job's mesh exactly as that job does, then draws
@@ -377,7 +377,7 @@ pub fn run(argv: &[String]) -> Result<()> {
                         let coarse = coarsen_mesh(&mesh, &cfg, &mut rng);
                         if coarse.quads.len() == mesh.quads.len() {
                             let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-                            say!("[{n}/{total}] {name}: no chord could be collapsed (or the mesh is not a valid manifold); no sample");
+                            note!("[{n}/{total}] {name}: no chord could be collapsed (or the mesh is not a valid manifold); no sample");
                             return Ok(None);
                         }
                         coarse
@@ -439,7 +439,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         Ok(Some((index_line(&file, &sample), file)))
     });
     for p in &not_files {
-        say!("warning: skipping {}: {}", p.display(), not_a_file(p));
+        note!("warning: skipping {}: {}", p.display(), not_a_file(p));
     }
     let mut index = String::from("# file\tpoints\tcandidates\tpositives\tcoverage\n");
     let mut files = Vec::new();

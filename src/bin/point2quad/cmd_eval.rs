@@ -60,7 +60,7 @@ pub fn run(argv: &[String]) -> Result<()> {
                 })
                 .collect();
             if let Some(&first) = odd.first() {
-                crate::output::say!(
+                crate::output::note!(
                     "point2quad eval: note: {g}: {} of its {} faces are not quads with four distinct \
                      corners (the first is face {first}, counting from 0, with {} corners); they count \
                      in recall, and no predicted quad can match them",
@@ -78,7 +78,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         None => None,
     };
     if gt.as_ref().is_some_and(|g| g.empty_prediction) {
-        crate::output::say!(
+        crate::output::note!(
             "point2quad eval: note: {pred_path} has no faces to sample (empty prediction): \
              precision 0, recall 0, Chamfer undefined"
         );

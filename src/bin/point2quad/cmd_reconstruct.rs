@@ -356,7 +356,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let pp = rep.postprocess.clone().unwrap_or_default();
     let (filled, refused) = (pp.hole_fill.quads_added(), pp.refused_on_insertion + pp.removed_by_score);
     // Through `output::stderr`: `eprintln!` panics when stderr is a closed pipe.
-    crate::output::stderr(&format!(
+    crate::output::info(&format!(
         "reconstruct: {} points, {} candidates, {} predicted real, {} faces kept ({} removed/refused), {} floater faces removed, {} folded faces taken out, {} candidates rescued at holes, {} hole quads filled ({} new vertices), {} loops closed ({} quads, {} faces taken out), {} loops sealed ({} faces replaced by {}), {} badly shaped faces re-split -> {}\n",
         rep.points,
         rep.candidates,
@@ -378,7 +378,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         out.display()
     ));
     if cfg.second_pass.is_some() && cfg.run_postprocess {
-        crate::output::stderr(&match rep.second_pass_dropped {
+        crate::output::info(&match rep.second_pass_dropped {
             Some(d) => format!(
                 "reconstruct: second pass: {d} point(s) no face used lay inside a face and were left out as noise\n"
             ),
@@ -430,7 +430,7 @@ pub fn run(argv: &[String]) -> Result<()> {
             off_default_candidates(&cfg.candidates)
         ));
     }
-    crate::output::stderr(&format!(
+    crate::output::info(&format!(
         "reconstruct: time: {} (total {:.0} ms, {})\n",
         stages.join(", "),
         t0.elapsed().as_secs_f64() * 1e3,

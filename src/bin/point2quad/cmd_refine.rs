@@ -219,7 +219,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         } else {
             tr.push(rs);
         }
-        crate::output::stderr(&format!("\rrefine: scored {}/{n_samples} samples   ", i + 1));
+        crate::output::info(&format!("\rrefine: scored {}/{n_samples} samples   ", i + 1));
     }
     let cands: usize = tr.iter().map(|s| s.quads.len()).sum();
     say!(
@@ -235,7 +235,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let no_val = va.is_empty();
     let mut progress = |p: RefineProgress| match p {
         RefineProgress::Epoch { round, epoch, loss } => {
-            crate::output::stderr(&format!(
+            crate::output::info(&format!(
                 "\rround {round}/{rounds} epoch {epoch}/{}: loss {loss:.4}, {:.0}s   ",
                 cfg.epochs,
                 t1.elapsed().as_secs_f64()

@@ -104,7 +104,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     commit_all(staged)?;
     let shape = a.value("--from").unwrap_or(shape);
-    crate::output::stderr(&format!(
+    crate::output::info(&format!(
         "synth: {shape} (seed {seed}): {} vertices, {} quads, {} noise points -> {out}\n",
         mesh.vertices.len(),
         mesh.quads.len(),

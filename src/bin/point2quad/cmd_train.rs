@@ -2,7 +2,7 @@
 //! `point2quad dataset`, with a validation split, per-epoch checkpoints and resume.
 
 use crate::args::{Args, Spec};
-use crate::output::say;
+use crate::output::{note, say};
 use point2quad::nn::checkpoint::{self, Checkpoint, Fnv1a, TrainState};
 use point2quad::nn::kpfcnn::KpfcnnConfig;
 use point2quad::pipeline::dataset::{load_sample, noise_variant, Sample, EXTENSION, VARIANT_SEP};
@@ -460,7 +460,7 @@ impl RunOptions<'_> {
                 continue;
             }
             let Some(&(_, opt)) = RUN_OPTIONS.iter().find(|(k, _)| k == key) else {
-                say!("train: note: {ckpt} records {key} = {stored:?}, which this build does not read");
+                note!("train: note: {ckpt} records {key} = {stored:?}, which this build does not read");
                 continue;
             };
             let now = self.get(key);
@@ -475,7 +475,7 @@ impl RunOptions<'_> {
             if given || (augmentation && no_augment) {
                 let opt = if given { opt } else { "--no-augment" };
                 if key == "lr" {
-                    say!(
+                    note!(
                         "train: note: --lr {now} with --resume: the run in {ckpt} used --lr {stored}; the schedule from epoch 1 is recomputed with {now}, so the run no longer continues exactly"
                     );
                     continue;
@@ -597,11 +597,11 @@ pub fn run(argv: &[String]) -> Result<()> {
             })?;
             if state.run.is_empty() {
                 // A checkpoint of a build before the run record: the options are not in it.
-                say!(
+                note!(
                     "train: note: {r} holds no record of its run's options (an older build wrote it): the run continues exactly only with the options it started with"
                 );
                 if let Some(lr) = a.value("--lr") {
-                    say!(
+                    note!(
                         "train: note: --lr {lr} with --resume: the schedule from epoch 1 is recomputed with {lr}, so the run continues exactly only if it started with it"
                     );
                 }
@@ -627,7 +627,7 @@ pub fn run(argv: &[String]) -> Result<()> {
                 let m = Model::load(Path::new(w))?;
                 // The rounds were trained on this classifier's probabilities: stale after.
                 let m = if m.refiner().is_some() {
-                    say!("train: --init {w}: its refinement rounds are dropped (run `point2quad refine` after)");
+                    note!("train: --init {w}: its refinement rounds are dropped (run `point2quad refine` after)");
                     m.with_refinement(0, &[], point2quad::pipeline::refine::SideRule::Direction, 0)?
                 } else {
                     m
@@ -730,7 +730,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let no_val = va.is_empty();
     let mut progress = |p: Progress| match p {
         Progress::Step { epoch, step, steps, loss } => {
-            crate::output::stderr(&format!(
+            crate::output::info(&format!(
                 "\repoch {epoch}/{} step {step}/{steps} loss {loss:.4}   ",
                 cfg.epochs
             ));

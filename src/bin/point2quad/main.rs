@@ -27,6 +27,7 @@ USAGE:
 OPTIONS (every command):
     --threads N  worker threads, 1 to 1024 [all cores, or RAYON_NUM_THREADS]; results
                  do not depend on it
+    --quiet      no progress or summary lines on stderr; notes, warnings and errors stay
 
 COMMANDS:
     reconstruct  INPUT -o OUT.{obj,ply,off} [--model FILE] [--svg PREVIEW.svg] [--no-postprocess]
@@ -89,8 +90,9 @@ fn main() -> ExitCode {
         let _ = output::stdout(help);
         return ExitCode::SUCCESS;
     }
-    let rest = match take_threads(cmd, rest) {
-        Ok((threads, rest)) => {
+    let rest = match take_globals(cmd, rest) {
+        Ok((threads, quiet, rest)) => {
+            output::set_quiet(quiet);
             if let Some(n) = threads {
                 match point2quad::par::set_threads(n) {
                     Ok(m) if m != n => output::stderr(&format!(
@@ -125,11 +127,15 @@ fn main() -> ExitCode {
 /// Most worker threads `--threads` accepts.
 const MAX_THREADS: usize = 1024;
 
-/// Takes the global `--threads N` (or `--threads=N`) out of a command's arguments
-/// (up to a `--`, after which everything is positional).
-fn take_threads(cmd: &str, argv: &[String]) -> point2quad::Result<(Option<usize>, Vec<String>)> {
+/// A command's arguments without the global options, and those options' values.
+type Globals = (Option<usize>, bool, Vec<String>);
+
+/// Takes the global `--threads N` (or `--threads=N`) and `--quiet` out of a command's
+/// arguments (up to a `--`, after which everything is positional).
+fn take_globals(cmd: &str, argv: &[String]) -> point2quad::Result<Globals> {
     let usage = |m: String| point2quad::Error::Usage(format!("{cmd}: {m}"));
     let mut threads = None;
+    let mut quiet = false;
     let mut rest = Vec::with_capacity(argv.len());
     let mut i = 0;
     while i < argv.len() {
@@ -137,6 +143,14 @@ fn take_threads(cmd: &str, argv: &[String]) -> point2quad::Result<(Option<usize>
         if a == "--" {
             rest.extend(argv[i..].iter().cloned());
             break;
+        }
+        if a == "--quiet" {
+            if quiet {
+                return Err(usage("option --quiet given twice".into()));
+            }
+            quiet = true;
+            i += 1;
+            continue;
         }
         let value = if a == "--threads" {
             i += 1;
@@ -159,5 +173,5 @@ fn take_threads(cmd: &str, argv: &[String]) -> point2quad::Result<(Option<usize>
         }
         i += 1;
     }
-    Ok((threads, rest))
+    Ok((threads, quiet, rest))
 }

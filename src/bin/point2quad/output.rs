@@ -20,13 +20,33 @@ pub fn stdout(text: &str) -> Result<()> {
     }
 }
 
-/// `eprintln!` through [`stderr`], which ignores write errors: `eprintln!` panics
-/// when stderr is a closed pipe (`train ... 2>&1 | head`), which killed a training
-/// run at its next progress line.
+/// Progress and summary lines (`eprintln!` through [`info`]): silenced by `--quiet`.
+/// Not `eprintln!`, which panics when stderr is a closed pipe (`train ... 2>&1 | head`)
+/// and so killed a training run at its next progress line.
 macro_rules! say {
-    ($($t:tt)*) => { $crate::output::stderr(&format!("{}\n", format_args!($($t)*))) };
+    ($($t:tt)*) => { $crate::output::info(&format!("{}\n", format_args!($($t)*))) };
 }
 pub(crate) use say;
+
+/// Notes and warnings (`eprintln!` through [`stderr`]): shown even with `--quiet`.
+macro_rules! note {
+    ($($t:tt)*) => { $crate::output::stderr(&format!("{}\n", format_args!($($t)*))) };
+}
+pub(crate) use note;
+
+static QUIET: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// `--quiet`: from now on [`info`] writes nothing.
+pub fn set_quiet(quiet: bool) {
+    QUIET.store(quiet, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Writes a progress or summary line to stderr through [`stderr`], unless `--quiet`.
+pub fn info(text: &str) {
+    if !QUIET.load(std::sync::atomic::Ordering::Relaxed) {
+        stderr(text);
+    }
+}
 
 /// Writes `text` to stderr; failures are ignored (there is no channel left to report them on).
 pub fn stderr(text: &str) {

@@ -1531,3 +1531,44 @@ fn threads_and_quiet_options_change_no_result() {
     let err = fails(&["eval", "--", "--threads"], 2);
     assert!(err.contains("--threads: unknown mesh format"), "{err}");
 }
+
+/// `reconstruct --progress` names every stage of the final time line as it ends
+/// (the second pass's own stages under "second pass:"); a small cloud without it gets
+/// none of those lines, and `--quiet` silences them.
+#[test]
+fn reconstruct_progress_names_each_stage_as_it_ends() {
+    let s = Scratch::new("progress");
+    let cloud = s.p("c.xyz");
+    ok(&["synth", "--shape", "torus", "--seed", "2", "-o", &cloud]);
+    let err =
+        String::from_utf8_lossy(&ok(&["reconstruct", &cloud, "-o", &s.p("a.obj"), "--progress"]).stderr)
+            .to_string();
+    let time = err.lines().find_map(|l| l.strip_prefix("reconstruct: time: ")).expect("a time line");
+    let stages: Vec<&str> = time
+        .split(" (total")
+        .next()
+        .unwrap()
+        .split(", ")
+        .map(|st| st.rsplit_once(' ').unwrap().0.rsplit_once(' ').unwrap().0)
+        .filter(|n| *n != "read" && *n != "write" && *n != "second pass")
+        .collect();
+    assert!(stages.len() >= 6, "{time}");
+    let progress: Vec<&str> = err
+        .lines()
+        .filter_map(|l| l.strip_prefix("reconstruct: "))
+        .filter(|l| l.ends_with(" s") && !l.starts_with("time:"))
+        .map(|l| l.rsplit_once(' ').unwrap().0.rsplit_once(' ').unwrap().0)
+        .filter(|n| !n.starts_with("second pass:"))
+        .collect();
+    assert_eq!(progress, stages, "{err}");
+    assert!(err.contains("reconstruct: second pass: candidates "), "{err}");
+    assert!(err.contains("points read from") && err.contains("c.xyz"), "{err}");
+    let plain =
+        String::from_utf8_lossy(&ok(&["reconstruct", &cloud, "-o", &s.p("b.obj")]).stderr).to_string();
+    assert!(!plain.contains("stage times follow") && !plain.contains("reconstruct: candidates "), "{plain}");
+    assert_eq!(std::fs::read(s.p("a.obj")).unwrap(), std::fs::read(s.p("b.obj")).unwrap());
+    let quiet = ok(&["reconstruct", &cloud, "-o", &s.p("q.obj"), "--progress", "--quiet"]);
+    assert!(quiet.stderr.is_empty(), "{}", String::from_utf8_lossy(&quiet.stderr));
+    // Not a post-process switch: allowed with --no-postprocess.
+    ok(&["reconstruct", &cloud, "-o", &s.p("r.obj"), "--progress", "--no-postprocess"]);
+}

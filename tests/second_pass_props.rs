@@ -6,7 +6,8 @@ use point2quad::mesh::halfedge::HalfedgeMesh;
 use point2quad::mesh::validate::validate;
 use point2quad::pipeline::model::Model;
 use point2quad::pipeline::reconstruct::{
-    reconstruct, reconstruct_with_report, ReconstructConfig, SecondPass, SecondPassCover, SecondPassMode,
+    reconstruct, reconstruct_observed, reconstruct_with_report, ReconstructConfig, SecondPass,
+    SecondPassCover, SecondPassMode, StageDone,
 };
 use point2quad::pipeline::second_pass::{covered_unused, covered_unused_by};
 use point2quad::rng::Rng;
@@ -179,8 +180,8 @@ proptest! {
 /// pass leaves them unused and inside faces, the second pass drops exactly those, and
 /// no output face uses one; the output is a valid manifold mesh whose first vertices
 /// are the input, bit for bit, in both modes.
-#[test]
-fn the_second_pass_drops_the_points_inside_faces_and_keeps_the_mesh_valid() {
+/// A 12 × 12 grid, gently waved, plus 12 noise points near face centres.
+fn grid_with_noise() -> (Vec<[f64; 3]>, usize, usize) {
     let n = 12;
     let mut pts = Vec::new();
     for y in 0..n {
@@ -200,6 +201,12 @@ fn the_second_pass_drops_the_points_inside_faces_and_keeps_the_mesh_valid() {
             m[2] + 0.004 * (rng.f64() - 0.5),
         ]);
     }
+    (pts, n, grid)
+}
+
+#[test]
+fn the_second_pass_drops_the_points_inside_faces_and_keeps_the_mesh_valid() {
+    let (pts, n, grid) = grid_with_noise();
     let one = ReconstructConfig { second_pass: None, ..Default::default() };
     let first = reconstruct(&pts, shipped(), &one).expect("first pass");
     let mut used = vec![false; first.vertices.len()];
@@ -245,4 +252,37 @@ fn the_second_pass_drops_the_points_inside_faces_and_keeps_the_mesh_valid() {
     // Without a second pass the report says so.
     let (_, rep) = reconstruct_with_report(&pts, shipped(), &one).expect("one pass");
     assert_eq!(rep.second_pass_dropped, None);
+}
+
+/// `reconstruct_observed` tells of every stage as it ends: the report's timings in
+/// order (pass 1), the second pass's own stages one by one (pass 2) in place of the
+/// report's "second pass" sum; and its result is `reconstruct_with_report`'s.
+#[test]
+fn the_observer_hears_every_stage_in_order() {
+    let (pts, _, _) = grid_with_noise();
+    for second_pass in [None, ReconstructConfig::default().second_pass] {
+        let cfg = ReconstructConfig { second_pass, ..Default::default() };
+        let mut heard: Vec<StageDone> = Vec::new();
+        let (mesh, rep) =
+            reconstruct_observed(&pts, &[shipped()], &cfg, &mut |s| heard.push(s)).expect("observed");
+        let (plain, _) = reconstruct_with_report(&pts, shipped(), &cfg).expect("plain");
+        assert_eq!(mesh.quads, plain.quads);
+        let pass1: Vec<(&str, f64)> =
+            heard.iter().filter(|s| s.pass == 1).map(|s| (s.stage, s.seconds)).collect();
+        let pass2: Vec<&StageDone> = heard.iter().filter(|s| s.pass == 2).collect();
+        let mut timings = rep.timings.clone();
+        if rep.second_pass_dropped.is_some() {
+            let at = timings.iter().position(|t| t.0 == "second pass").expect("the second pass's entry");
+            let (_, sum) = timings.remove(at);
+            let names: Vec<&str> = pass2.iter().map(|s| s.stage).collect();
+            assert_eq!(names, ["candidates", "features", "classify", "refine"]);
+            let heard_sum: f64 = pass2.iter().map(|s| s.seconds).sum();
+            assert!((heard_sum - sum).abs() <= 1e-12 * sum.max(1.0), "{heard_sum} against {sum}");
+        } else {
+            assert!(cfg.second_pass.is_none(), "the premise: the grid's noise makes the second pass run");
+            assert!(pass2.is_empty());
+        }
+        assert_eq!(pass1, timings);
+        assert_eq!(pass1.first().map(|t| t.0), Some("normalise"));
+    }
 }

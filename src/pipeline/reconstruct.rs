@@ -191,6 +191,34 @@ pub fn reconstruct_ensemble_with_report(
     models: &[&Model],
     cfg: &ReconstructConfig,
 ) -> Result<(QuadMesh, ReconstructReport)> {
+    reconstruct_observed(points, models, cfg, &mut |_| {})
+}
+
+/// A stage of [`reconstruct_observed`] that has just ended.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StageDone {
+    /// 2 for the stages the second pass runs on its own cloud (candidates, features,
+    /// classify, refine), else 1.
+    pub pass: u8,
+    /// The stage's name, as in [`ReconstructReport::timings`].
+    pub stage: &'static str,
+    /// Its time (0 on wasm32, which has no clock).
+    pub seconds: f64,
+}
+
+/// [`reconstruct_ensemble_with_report`], calling `observer` as each stage ends (for
+/// progress on large clouds): every entry of the report's timings, in order, as pass
+/// 1, except that when the second pass ran (`second_pass_dropped` is `Some`) its
+/// "second pass" entry is the sum of the stages reported one by one as pass 2.
+///
+/// # Errors
+/// As [`reconstruct_ensemble`].
+pub fn reconstruct_observed(
+    points: &[[f64; 3]],
+    models: &[&Model],
+    cfg: &ReconstructConfig,
+    observer: &mut dyn FnMut(StageDone),
+) -> Result<(QuadMesh, ReconstructReport)> {
     if models.is_empty() {
         return Err(Error::invalid("an ensemble needs at least one model"));
     }
@@ -205,7 +233,7 @@ pub fn reconstruct_ensemble_with_report(
     // Before any work on the cloud (the merge share is checked by `prepare_cloud`).
     crate::pipeline::candidates::check_neighbour_counts(&cfg.candidates)?;
     let mut report = ReconstructReport { points: points.len(), ..Default::default() };
-    let mut clock = Clock::new();
+    let mut clock = Clock::new(observer);
     let prep = prepare_cloud(points, cfg.merge_share)?;
     report.duplicates = prep.duplicates;
     report.outliers = prep.outliers;
@@ -250,7 +278,9 @@ pub fn reconstruct_ensemble_with_report(
             if kept.len() < u && kept.len() >= 4 {
                 let local2: Vec<[f32; 3]> = kept.iter().map(|&i| local[i as usize]).collect();
                 let mut report2 = ReconstructReport::default();
+                clock.pass = 2;
                 let (q2, p2) = score_cloud(&local2, models, cfg, &mut clock, &mut report2)?;
+                clock.pass = 1;
                 // No candidate among the points left (too few, or all on a line): the
                 // first pass's mesh stands.
                 if !q2.is_empty() {
@@ -259,8 +289,9 @@ pub fn reconstruct_ensemble_with_report(
                     let second = split_at_threshold(&quads, &probs, cfg.threshold);
                     report.predicted = second.0.len();
                     report.second_pass_dropped = Some(u - kept.len());
+                    // The sum of the stages the observer was told of one by one.
                     let t: f64 = report2.timings.iter().map(|t| t.1).sum();
-                    clock.record(&mut report, "second pass", t);
+                    report.timings.push(("second pass", t));
                     (mesh, pp) = post(&second)?;
                 }
             }
@@ -291,7 +322,7 @@ fn score_cloud(
     local: &[[f32; 3]],
     models: &[&Model],
     cfg: &ReconstructConfig,
-    clock: &mut Clock,
+    clock: &mut Clock<'_>,
     report: &mut ReconstructReport,
 ) -> Result<(Vec<[u32; 4]>, Vec<f32>)> {
     let cands = generate(local, &cfg.candidates)?;
@@ -772,16 +803,22 @@ fn distinct_points(points: &[[f64; 3]]) -> Vec<u32> {
     first
 }
 
-struct Clock {
+/// Times the stages and tells the observer of [`reconstruct_observed`] as each ends.
+struct Clock<'a> {
     #[cfg(not(target_arch = "wasm32"))]
     t: std::time::Instant,
+    /// 2 while the second pass scores its cloud, else 1.
+    pass: u8,
+    observer: &'a mut dyn FnMut(StageDone),
 }
 
-impl Clock {
-    fn new() -> Clock {
+impl<'a> Clock<'a> {
+    fn new(observer: &'a mut dyn FnMut(StageDone)) -> Clock<'a> {
         Clock {
             #[cfg(not(target_arch = "wasm32"))]
             t: std::time::Instant::now(),
+            pass: 1,
+            observer,
         }
     }
     /// Records the time since the last lap (0 on wasm32, which has no clock).
@@ -801,9 +838,10 @@ impl Clock {
         #[cfg(target_arch = "wasm32")]
         0.0
     }
-    /// Records a stage's time, measured by [`Clock::split`]s.
+    /// Records a stage's time, measured by [`Clock::split`]s, and tells the observer.
     fn record(&mut self, report: &mut ReconstructReport, stage: &'static str, seconds: f64) {
         report.timings.push((stage, seconds));
+        (self.observer)(StageDone { pass: self.pass, stage, seconds });
     }
 }
 

@@ -1512,21 +1512,34 @@ fn threads_and_quiet_options_change_no_result() {
     // Bad values are usage errors that name the option; nothing is written.
     let out = s.p("bad.obj");
     let cloud = s.p("meshes/a_sphere.obj");
-    for bad in [
-        &["--threads", "0"][..],
-        &["--threads", "x"],
-        &["--threads", "1025"],
-        &["--threads=-2"],
-        &["--threads"],
+    for (bad, why) in [
+        (&["--threads", "0"][..], "a whole number from 1 to 1024"),
+        (&["--threads", "x"], "a whole number from 1 to 1024"),
+        (&["--threads", "1025"], "a whole number from 1 to 1024"),
+        (&["--threads=-2"], "a whole number from 1 to 1024"),
+        (&["--threads"], "option --threads needs a value"),
     ] {
         let mut args = vec!["reconstruct", cloud.as_str(), "-o", out.as_str()];
         args.extend_from_slice(bad);
         let err = fails(&args, 2);
-        assert!(err.contains("--threads"), "{bad:?}: {err}");
+        assert!(err.contains("--threads") && err.contains(why), "{bad:?}: {err}");
     }
+    // Before the command too.
+    let before = ok(&["--threads", "2", "--quiet", "reconstruct", &cloud, "-o", &s.p("before.obj")]);
+    assert!(before.stderr.is_empty(), "{}", String::from_utf8_lossy(&before.stderr));
+    let help = String::from_utf8_lossy(&ok(&["eval", "--help"]).stdout).to_string();
+    assert!(help.contains("--threads N") && help.contains("--quiet"), "{help}");
     let err = fails(&["eval", &cloud, "--threads", "2", "--threads", "2"], 2);
     assert!(err.contains("given twice"), "{err}");
     assert!(!Path::new(&out).exists());
+    // A note or warning stays under --quiet, the progress lines go.
+    std::fs::write(s.p("meshes/broken.obj"), "v 0 0 0\nf 1 2 3 4\n").unwrap();
+    let err = String::from_utf8_lossy(
+        &ok(&["dataset", "--meshes", &meshes, "--out", &s.p("dq"), "--seed", "3", "--quiet"]).stderr,
+    )
+    .to_string();
+    assert!(err.contains("warning: skipping") && err.contains("broken.obj"), "{err}");
+    assert!(!err.contains("coverage") && !err.contains("samples in"), "{err}");
     // After `--` it is a file name, not the option.
     let err = fails(&["eval", "--", "--threads"], 2);
     assert!(err.contains("--threads: unknown mesh format"), "{err}");

@@ -256,33 +256,58 @@ fn the_second_pass_drops_the_points_inside_faces_and_keeps_the_mesh_valid() {
 
 /// `reconstruct_observed` tells of every stage as it ends: the report's timings in
 /// order (pass 1), the second pass's own stages one by one (pass 2) in place of the
-/// report's "second pass" sum; and its result is `reconstruct_with_report`'s.
+/// report's "second pass" sum that follows them; and its result is
+/// `reconstruct_with_report`'s. Paths: one pass; a second pass that drops the noise; one
+/// that finds nothing to drop (the grid alone); no post-process.
 #[test]
 fn the_observer_hears_every_stage_in_order() {
-    let (pts, _, _) = grid_with_noise();
-    for second_pass in [None, ReconstructConfig::default().second_pass] {
-        let cfg = ReconstructConfig { second_pass, ..Default::default() };
+    let (pts, _, grid) = grid_with_noise();
+    let two = ReconstructConfig::default();
+    let cases = [
+        (&pts[..], ReconstructConfig { second_pass: None, ..Default::default() }, "one pass"),
+        (&pts[..], two.clone(), "dropped"),
+        (&pts[..grid], two.clone(), "nothing to drop"),
+        (&pts[..], ReconstructConfig { run_postprocess: false, ..two.clone() }, "no post-process"),
+    ];
+    for (cloud, cfg, case) in cases {
         let mut heard: Vec<StageDone> = Vec::new();
         let (mesh, rep) =
-            reconstruct_observed(&pts, &[shipped()], &cfg, &mut |s| heard.push(s)).expect("observed");
-        let (plain, _) = reconstruct_with_report(&pts, shipped(), &cfg).expect("plain");
-        assert_eq!(mesh.quads, plain.quads);
+            reconstruct_observed(cloud, &[shipped()], &cfg, &mut |s| heard.push(s)).expect("observed");
+        let (plain, _) = reconstruct_with_report(cloud, shipped(), &cfg).expect("plain");
+        assert_eq!(mesh.quads, plain.quads, "{case}");
         let pass1: Vec<(&str, f64)> =
             heard.iter().filter(|s| s.pass == 1).map(|s| (s.stage, s.seconds)).collect();
         let pass2: Vec<&StageDone> = heard.iter().filter(|s| s.pass == 2).collect();
+        // The pass-2 stages come together, between pass-1 stages.
+        let first2 = heard.iter().position(|s| s.pass == 2).unwrap_or(heard.len());
+        assert!(heard[first2..first2 + pass2.len()].iter().all(|s| s.pass == 2), "{case}");
         let mut timings = rep.timings.clone();
-        if rep.second_pass_dropped.is_some() {
-            let at = timings.iter().position(|t| t.0 == "second pass").expect("the second pass's entry");
-            let (_, sum) = timings.remove(at);
-            let names: Vec<&str> = pass2.iter().map(|s| s.stage).collect();
-            assert_eq!(names, ["candidates", "features", "classify", "refine"]);
-            let heard_sum: f64 = pass2.iter().map(|s| s.seconds).sum();
-            assert!((heard_sum - sum).abs() <= 1e-12 * sum.max(1.0), "{heard_sum} against {sum}");
+        if pass2.is_empty() {
+            assert!(
+                !timings.iter().any(|t| t.0 == "second pass") || rep.second_pass_dropped.is_none(),
+                "{case}"
+            );
         } else {
-            assert!(cfg.second_pass.is_none(), "the premise: the grid's noise makes the second pass run");
-            assert!(pass2.is_empty());
+            // The sum entry sits where the pass-2 stages were heard.
+            assert_eq!(timings[first2].0, "second pass", "{case}: {timings:?}");
+            let (_, sum) = timings.remove(first2);
+            let names: Vec<&str> = pass2.iter().map(|s| s.stage).collect();
+            assert_eq!(names, ["candidates", "features", "classify", "refine"], "{case}");
+            let heard_sum: f64 = pass2.iter().map(|s| s.seconds).sum();
+            assert!((heard_sum - sum).abs() <= 1e-12 * sum.max(1.0), "{case}: {heard_sum} against {sum}");
         }
-        assert_eq!(pass1, timings);
-        assert_eq!(pass1.first().map(|t| t.0), Some("normalise"));
+        assert_eq!(pass1, timings, "{case}");
+        assert_eq!(pass1.first().map(|t| t.0), Some("normalise"), "{case}");
+        // Each case takes the path it is named for.
+        let last = rep.timings.last().map(|t| t.0);
+        match case {
+            "one pass" | "no post-process" => {
+                assert!(pass2.is_empty() && last == Some("postprocess"), "{case}: {:?}", rep.timings)
+            }
+            "dropped" => {
+                assert!(rep.second_pass_dropped.is_some() && last == Some("second postprocess"), "{case}")
+            }
+            _ => assert!(pass2.is_empty() && last == Some("second pass"), "{case}: {:?}", rep.timings),
+        }
     }
 }

@@ -208,8 +208,8 @@ pub struct StageDone {
 
 /// [`reconstruct_ensemble_with_report`], calling `observer` as each stage ends (for
 /// progress on large clouds): every entry of the report's timings, in order, as pass
-/// 1, except that when the second pass ran (`second_pass_dropped` is `Some`) its
-/// "second pass" entry is the sum of the stages reported one by one as pass 2.
+/// 1, except that when the second pass scored its cloud, the "second pass" entry right
+/// after that is the sum of its stages, which the observer hears one by one as pass 2.
 ///
 /// # Errors
 /// As [`reconstruct_ensemble`].
@@ -281,6 +281,9 @@ pub fn reconstruct_observed(
                 clock.pass = 2;
                 let (q2, p2) = score_cloud(&local2, models, cfg, &mut clock, &mut report2)?;
                 clock.pass = 1;
+                // The sum of the stages the observer was told of one by one.
+                let t: f64 = report2.timings.iter().map(|t| t.1).sum();
+                report.timings.push(("second pass", t));
                 // No candidate among the points left (too few, or all on a line): the
                 // first pass's mesh stands.
                 if !q2.is_empty() {
@@ -289,9 +292,6 @@ pub fn reconstruct_observed(
                     let second = split_at_threshold(&quads, &probs, cfg.threshold);
                     report.predicted = second.0.len();
                     report.second_pass_dropped = Some(u - kept.len());
-                    // The sum of the stages the observer was told of one by one.
-                    let t: f64 = report2.timings.iter().map(|t| t.1).sum();
-                    report.timings.push(("second pass", t));
                     (mesh, pp) = post(&second)?;
                 }
             }
@@ -306,13 +306,19 @@ pub fn reconstruct_observed(
     };
     report.faces = mesh.quads.len();
     // With a second pass configured, the last stage is its post-process, or (when it did
-    // not run) the test that found nothing to leave out.
+    // not run) the test that found nothing to leave out, or nothing more when its
+    // scoring found no candidate (its "second pass" entry is then the last).
+    let scored_only =
+        report.second_pass_dropped.is_none() && report.timings.last().is_some_and(|t| t.0 == "second pass");
     let last = match (&cfg.second_pass, report.second_pass_dropped) {
-        (Some(_), Some(_)) if cfg.run_postprocess => "second postprocess",
-        (Some(_), None) if cfg.run_postprocess => "second pass",
-        _ => "postprocess",
+        (Some(_), Some(_)) if cfg.run_postprocess => Some("second postprocess"),
+        (Some(_), None) if cfg.run_postprocess && !scored_only => Some("second pass"),
+        (Some(_), None) if cfg.run_postprocess => None,
+        _ => Some("postprocess"),
     };
-    clock.lap(&mut report, last);
+    if let Some(last) = last {
+        clock.lap(&mut report, last);
+    }
     Ok((mesh, report))
 }
 

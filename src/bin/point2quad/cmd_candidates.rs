@@ -134,7 +134,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     point2quad::io::atomic::write_atomic(std::path::Path::new(&output), |w| {
         w.write_all(text.as_bytes()).map_err(|e| point2quad::Error::io(&output, e))
     })?;
-    // Through `output::stderr`: `eprintln!` panics when stderr is a closed pipe.
+    // Through `output::info` (silenced by --quiet): `eprintln!` panics when stderr is a closed pipe.
     crate::output::info(&format!(
         "candidates: {} points, {} candidates ({:.2} per point), read {:.3} s, generate {:.3} s -> {}\n",
         points.len(),

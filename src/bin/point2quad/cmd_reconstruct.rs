@@ -18,6 +18,12 @@ use std::path::{Path, PathBuf};
 /// 200,000-point cloud takes about 20 s on two cores).
 const PROGRESS_POINTS: usize = 50_000;
 
+/// Whether to name each stage as it ends: asked for, or a cloud of at least
+/// [`PROGRESS_POINTS`] points.
+fn wants_progress(asked: bool, points: usize) -> bool {
+    asked || points >= PROGRESS_POINTS
+}
+
 pub const HELP: &str = "\
 point2quad reconstruct: point cloud -> pure-quad manifold mesh
 
@@ -334,7 +340,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     };
     let members: Vec<&Model> = models.iter().map(|(_, m)| m).collect();
     // Progress on long work: a large cloud's stages are named as they end.
-    let long = a.switch("--progress") || points.len() >= PROGRESS_POINTS;
+    let long = wants_progress(a.switch("--progress"), points.len());
     if long {
         say!(
             "reconstruct: {} points read from {} in {t_read:.1} s; stage times follow",
@@ -378,7 +384,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     // All zero under --no-postprocess.
     let pp = rep.postprocess.clone().unwrap_or_default();
     let (filled, refused) = (pp.hole_fill.quads_added(), pp.refused_on_insertion + pp.removed_by_score);
-    // Through `output::stderr`: `eprintln!` panics when stderr is a closed pipe.
+    // Through `output::info` (silenced by --quiet): `eprintln!` panics when stderr is a closed pipe.
     crate::output::info(&format!(
         "reconstruct: {} points, {} candidates, {} predicted real, {} faces kept ({} removed/refused), {} floater faces removed, {} folded faces taken out, {} candidates rescued at holes, {} hole quads filled ({} new vertices), {} loops closed ({} quads, {} faces taken out), {} loops sealed ({} faces replaced by {}), {} badly shaped faces re-split -> {}\n",
         rep.points,
@@ -533,5 +539,18 @@ pub fn hygiene_notes(cmd: &str, input: &std::path::Path, points: &[[f64; 3]], h:
             h.unresolved,
             points[i]
         ));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stage_lines_from_the_threshold_on_or_when_asked() {
+        assert!(!wants_progress(false, PROGRESS_POINTS - 1));
+        assert!(wants_progress(false, PROGRESS_POINTS));
+        assert!(wants_progress(true, 4));
+        assert_eq!(PROGRESS_POINTS, 50_000, "the help text and README say 50,000");
     }
 }

@@ -15,6 +15,12 @@ mod output;
 
 use std::process::ExitCode;
 
+/// Appended to every command's `--help`.
+const GLOBAL_HELP: &str = "
+Also on every command: --threads N (worker threads, 1 to 1024; the same results for any
+count) and --quiet (no progress or summary lines); see `point2quad --help`.
+";
+
 /// A subcommand's entry point.
 type RunFn = fn(&[String]) -> point2quad::Result<()>;
 
@@ -24,9 +30,9 @@ point2quad: point cloud -> pure-quad manifold mesh (Point2Quad, from scratch)
 USAGE:
     point2quad <COMMAND> [ARGS...]        (point2quad <COMMAND> --help for details)
 
-OPTIONS (every command):
-    --threads N  worker threads, 1 to 1024 [all cores, or RAYON_NUM_THREADS]; results
-                 do not depend on it
+OPTIONS (every command, before or after it):
+    --threads N  worker threads, 1 to 1024 [all cores, or RAYON_NUM_THREADS, which it
+                 overrides]; results do not depend on it
     --quiet      no progress or summary lines on stderr; notes, warnings and errors stay
 
 COMMANDS:
@@ -58,11 +64,22 @@ fn main() -> ExitCode {
             }
         }
     }
-    let Some(cmd) = argv.first() else {
+    // The global options may also come before the command.
+    let mut at = 0;
+    while let Some(a) = argv.get(at) {
+        match a.as_str() {
+            "--quiet" => at += 1,
+            "--threads" => at += 2,
+            a if a.starts_with("--threads=") => at += 1,
+            _ => break,
+        }
+    }
+    let Some(cmd) = argv.get(at) else {
         output::stderr(USAGE);
         return ExitCode::from(2);
     };
-    let rest = &argv[1..];
+    let rest: Vec<String> = argv[..at].iter().chain(&argv[at + 1..]).cloned().collect();
+    let rest = &rest[..];
     let (help, run): (&str, RunFn) = match cmd.as_str() {
         "-h" | "--help" | "help" => {
             let _ = output::stdout(USAGE);
@@ -87,7 +104,7 @@ fn main() -> ExitCode {
         }
     };
     if rest.iter().any(|a| a == "-h" || a == "--help") {
-        let _ = output::stdout(help);
+        let _ = output::stdout(&format!("{help}{GLOBAL_HELP}"));
         return ExitCode::SUCCESS;
     }
     let rest = match take_globals(cmd, rest) {

@@ -79,23 +79,30 @@ fn three_mesh_data(s: &Scratch) -> String {
     data
 }
 
-/// A weights file (1 epoch on three small meshes) and the data folder, in `s`.
-fn trained(s: &Scratch) -> String {
-    let data = three_mesh_data(s);
-    let model = s.p("m.p2qm");
-    let out = ok(&[
+/// `train` for one epoch on `data` (no validation, 300 candidates a step) into `model`.
+fn train_tiny(data: &str, model: &str, extra: &[&str]) -> Output {
+    let mut args = vec![
         "train",
         "--data",
-        &data,
+        data,
         "--out",
-        &model,
+        model,
         "--epochs",
         "1",
         "--val-fraction",
         "0",
         "--max-candidates",
         "300",
-    ]);
+    ];
+    args.extend_from_slice(extra);
+    ok(&args)
+}
+
+/// A weights file (1 epoch on three small meshes) and the data folder, in `s`.
+fn trained(s: &Scratch) -> String {
+    let data = three_mesh_data(s);
+    let model = s.p("m.p2qm");
+    let out = train_tiny(&data, &model, &[]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("epoch 1/1"), "no progress line: {err}");
     assert!(Path::new(&model).is_file() && Path::new(&format!("{model}.ckpt")).is_file());
@@ -1474,28 +1481,12 @@ fn threads_and_quiet_options_change_no_result() {
             s.p(&format!("o{t}.obj")),
         );
         ok(&["dataset", "--meshes", &meshes, "--out", &data, "--seed", "3", "--threads", t]);
-        ok(&[
-            "train",
-            "--data",
-            &data,
-            "--out",
-            &model,
-            "--epochs",
-            "1",
-            "--val-fraction",
-            "0",
-            "--max-candidates",
-            "300",
-            &format!("--threads={t}"),
-        ]);
+        train_tiny(&data, &model, &[&format!("--threads={t}")]);
         refine_tiny(&data, &model, &rounds, "1", &["--threads", t]);
         if t == "1" {
             // --quiet: no progress lines, the same weights.
             let quiet = s.p("quiet.p2qm");
-            let args = ["--epochs", "1", "--val-fraction", "0", "--max-candidates", "300", "--quiet"];
-            let mut train = vec!["train", "--data", data.as_str(), "--out", quiet.as_str()];
-            train.extend_from_slice(&args);
-            let err = String::from_utf8_lossy(&ok(&train).stderr).to_string();
+            let err = String::from_utf8_lossy(&train_tiny(&data, &quiet, &["--quiet"]).stderr).to_string();
             assert!(err.is_empty(), "train --quiet: {err}");
             assert_eq!(std::fs::read(&quiet).unwrap(), std::fs::read(&model).unwrap());
         }

@@ -88,7 +88,7 @@ pub fn num_threads() -> usize {
 /// or an earlier call).
 pub fn set_threads(n: usize) -> crate::Result<usize> {
     if n == 0 {
-        return Err(crate::Error::Usage("--threads must be at least 1".into()));
+        return Err(crate::Error::Usage("the thread count must be at least 1".into()));
     }
     #[cfg(feature = "parallel")]
     {
@@ -117,5 +117,11 @@ mod tests {
             }
         });
         assert!(d.iter().enumerate().all(|(i, &x)| x == i));
+    }
+
+    #[test]
+    fn zero_threads_is_refused() {
+        let e = super::set_threads(0).unwrap_err().to_string();
+        assert!(e.contains("at least 1"), "{e}");
     }
 }

@@ -16,6 +16,8 @@ use point2quad::rng::Rng;
 use point2quad::Error;
 use proptest::prelude::*;
 use std::sync::OnceLock;
+#[path = "common/shipped.rs"]
+mod shipped;
 
 fn model() -> &'static Model {
     static M: OnceLock<Model> = OnceLock::new();
@@ -152,13 +154,7 @@ fn near_copies_give_the_faces_of_the_cloud() {
     // The shipped weights (an untrained model's handful of faces on this torus fell
     // to 49 when the rescue stopped folding quads back, session 24): most of the
     // torus's 128 faces, so the equalities below compare real reconstructions.
-    static SHIPPED: OnceLock<Model> = OnceLock::new();
-    let model = || {
-        SHIPPED.get_or_init(|| {
-            let p = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/point2quad-default.p2qm");
-            Model::load(std::path::Path::new(p)).expect("test: shipped weights")
-        })
-    };
+    let model = shipped::shipped;
     let mesh = shapes::torus(16, 8, 1.0, 0.35);
     let pts = mesh.vertices.clone();
     let cfg = ReconstructConfig::default();

@@ -18,19 +18,13 @@ use point2quad::rng::Rng;
 use proptest::prelude::*;
 use std::collections::HashSet;
 use std::sync::OnceLock;
+#[path = "common/shipped.rs"]
+mod shipped;
+use shipped::shipped;
 
 fn model() -> &'static Model {
     static M: OnceLock<Model> = OnceLock::new();
     M.get_or_init(|| Model::new(ModelConfig::default_preset(), 7).expect("test: model"))
-}
-
-/// The shipped weights: real scores, so the faces compared are many.
-fn shipped() -> &'static Model {
-    static M: OnceLock<Model> = OnceLock::new();
-    M.get_or_init(|| {
-        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/point2quad-default.p2qm");
-        Model::load(std::path::Path::new(p)).expect("test: shipped weights")
-    })
 }
 
 /// A small noisy cloud (a few hundred points) of shape `kind`. Every coordinate is

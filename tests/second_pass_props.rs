@@ -4,7 +4,6 @@
 
 use point2quad::mesh::halfedge::HalfedgeMesh;
 use point2quad::mesh::validate::validate;
-use point2quad::pipeline::model::Model;
 use point2quad::pipeline::reconstruct::{
     reconstruct, reconstruct_observed, reconstruct_with_report, ReconstructConfig, SecondPass,
     SecondPassCover, SecondPassMode, StageDone,
@@ -12,15 +11,9 @@ use point2quad::pipeline::reconstruct::{
 use point2quad::pipeline::second_pass::{covered_unused, covered_unused_by};
 use point2quad::rng::Rng;
 use proptest::prelude::*;
-use std::sync::OnceLock;
-
-fn shipped() -> &'static Model {
-    static M: OnceLock<Model> = OnceLock::new();
-    M.get_or_init(|| {
-        let p = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/point2quad-default.p2qm");
-        Model::load(std::path::Path::new(p)).expect("test: shipped weights")
-    })
-}
+#[path = "common/shipped.rs"]
+mod shipped;
+use shipped::shipped;
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]

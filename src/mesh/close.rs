@@ -719,7 +719,7 @@ pub fn untangle_with_candidates(
 
 /// The loop through boundary half-edge `start`: its half-edges in order, or `None` when it
 /// has more than `max` edges.
-fn walk_loop(mesh: &HalfedgeMesh, start: HalfedgeId, max: usize) -> Option<Vec<HalfedgeId>> {
+pub(crate) fn walk_loop(mesh: &HalfedgeMesh, start: HalfedgeId, max: usize) -> Option<Vec<HalfedgeId>> {
     let mut lp = vec![start];
     let mut h = mesh.next(start);
     while h != start {

@@ -17,6 +17,7 @@
 
 use std::collections::HashMap;
 
+use super::close::walk_loop;
 use super::halfedge::HalfedgeMesh;
 use super::handles::{FaceId, VertexId};
 use super::hole_fill::quad_normal;
@@ -230,26 +231,14 @@ pub fn rescue_faces(
 /// How many of the boundary loops through the vertices `vs` have an odd number of edges
 /// (each loop counted once).
 fn odd_loops_at(mesh: &HalfedgeMesh, vs: &[u32; 4]) -> usize {
-    let mut seen: Vec<u32> = Vec::new();
+    let mut seen = Vec::new();
     let mut odd = 0;
     for &v in vs {
-        for h in mesh.vertex_outgoing(VertexId(v)) {
-            if !mesh.is_boundary(h) {
-                continue;
-            }
-            // The loop's smallest half-edge index names it.
-            let (mut c, mut len, mut least) = (h, 0usize, h.idx());
-            loop {
-                least = least.min(c.idx());
-                len += 1;
-                c = mesh.next(c);
-                if c == h {
-                    break;
-                }
-            }
-            if !seen.contains(&(least as u32)) {
-                seen.push(least as u32);
-                odd += len % 2;
+        for h in mesh.vertex_outgoing(VertexId(v)).filter(|&h| mesh.is_boundary(h)) {
+            if !seen.contains(&h) {
+                let lp = walk_loop(mesh, h, usize::MAX).expect("internal error: an unbounded walk");
+                odd += lp.len() % 2;
+                seen.extend(lp);
             }
         }
     }

@@ -249,6 +249,10 @@ pub fn reconstruct_observed(
     // → index in the output, whose vertices are the input points, then the added ones.
     let (n, u) = (points.len(), uniq.len());
     let to_output = |i: u32| if (i as usize) < u { distinct[i as usize] } else { (n - u) as u32 + i };
+    // The stage the last lap times: the post-process; with a second pass, the test that
+    // found nothing to leave out, its post-process, or nothing more when its scoring
+    // found no candidate (its "second pass" entry is then the last).
+    let mut last = Some("postprocess");
     let mesh = if cfg.run_postprocess {
         // The post-process runs in the normalised frame (in f64): in the input's own
         // coordinates its squared lengths and areas overflow at 1e200 and vanish at
@@ -264,6 +268,7 @@ pub fn reconstruct_observed(
         let faces = &first.0;
         if let Some(sp) = &cfg.second_pass {
             clock.lap(&mut report, "postprocess");
+            last = Some("second pass");
             let noise = match sp.cover {
                 SecondPassCover::All => covered_unused(&mesh.vertices, u, &mesh.quads, sp.tau),
                 SecondPassCover::Believed => {
@@ -284,6 +289,7 @@ pub fn reconstruct_observed(
                 // The sum of the stages the observer was told of one by one.
                 let t: f64 = report2.timings.iter().map(|t| t.1).sum();
                 report.timings.push(("second pass", t));
+                last = None;
                 // No candidate among the points left (too few, or all on a line): the
                 // first pass's mesh stands.
                 if !q2.is_empty() {
@@ -292,6 +298,7 @@ pub fn reconstruct_observed(
                     let second = split_at_threshold(&quads, &probs, cfg.threshold);
                     report.predicted = second.0.len();
                     report.second_pass_dropped = Some(u - kept.len());
+                    last = Some("second postprocess");
                     (mesh, pp) = post(&second)?;
                 }
             }
@@ -305,17 +312,6 @@ pub fn reconstruct_observed(
         QuadMesh { vertices: points.to_vec(), quads: faces.iter().map(|q| q.map(to_output)).collect() }
     };
     report.faces = mesh.quads.len();
-    // With a second pass configured, the last stage is its post-process, or (when it did
-    // not run) the test that found nothing to leave out, or nothing more when its
-    // scoring found no candidate (its "second pass" entry is then the last).
-    let scored_only =
-        report.second_pass_dropped.is_none() && report.timings.last().is_some_and(|t| t.0 == "second pass");
-    let last = match (&cfg.second_pass, report.second_pass_dropped) {
-        (Some(_), Some(_)) if cfg.run_postprocess => Some("second postprocess"),
-        (Some(_), None) if cfg.run_postprocess && !scored_only => Some("second pass"),
-        (Some(_), None) if cfg.run_postprocess => None,
-        _ => Some("postprocess"),
-    };
     if let Some(last) = last {
         clock.lap(&mut report, last);
     }

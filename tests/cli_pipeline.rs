@@ -1576,3 +1576,48 @@ fn reconstruct_progress_names_each_stage_as_it_ends() {
     // Not a post-process switch: allowed with --no-postprocess.
     ok(&["reconstruct", &cloud, "-o", &s.p("r.obj"), "--progress", "--no-postprocess"]);
 }
+
+/// `reconstruct --watertight` (session 32): on a noisy cloud whose default
+/// reconstruction leaves holes, the output is closed, valid and pure quad, its first
+/// vertices are the input points, and the summary says what was done;
+/// `--watertight-max-loop` without `--watertight` is a usage error that writes nothing.
+/// `repair --watertight` closes a torus with faces taken out.
+#[test]
+fn reconstruct_and_repair_watertight() {
+    let s = Scratch::new("watertight");
+    let cloud = s.p("cloud.xyz");
+    let (plain, closed) = (s.p("plain.obj"), s.p("closed.obj"));
+    let border = |mesh: &str| valid_mesh_metric(mesh, "boundary_edges");
+    let has_holes = |seed: &str| {
+        ok(&["synth", "--shape", "random", "-o", &cloud, "--noise", "0.1", "--seed", seed]);
+        ok(&["reconstruct", &cloud, "-o", &plain]);
+        border(&plain) > 0.0
+    };
+    let seeds = ["1", "2", "3", "4", "5", "6", "7", "8", "9", "10", "11", "12", "13", "14", "15", "16"];
+    assert!(seeds.iter().any(|seed| has_holes(seed)), "no case with holes among seeds {seeds:?}");
+    let out = ok(&["reconstruct", &cloud, "-o", &closed, "--watertight"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("watertight:") && err.contains("0 loop(s) left open"), "{err}");
+    assert_eq!(border(&closed), 0.0);
+    assert_eq!(valid_mesh_metric(&closed, "watertightness"), 1.0);
+    let pts = point2quad::io::points::read_points(Path::new(&cloud)).unwrap();
+    let mesh = point2quad::io::mesh_io::read_mesh(Path::new(&closed)).unwrap();
+    assert!(mesh.vertices.len() >= pts.len());
+    assert!(pts.iter().zip(&mesh.vertices).all(|(a, b)| a == b));
+    let never = s.p("never.obj");
+    let err = fails(&["reconstruct", &cloud, "-o", &never, "--watertight-max-loop", "8"], 2);
+    assert!(err.contains("--watertight"), "{err}");
+    assert!(!Path::new(&never).exists());
+
+    let t = shapes::torus(16, 8, 3.0, 1.0);
+    let kept: Vec<Vec<u32>> = t.quads.iter().enumerate().filter(|(i, _)| i % 7 != 3).map(|(_, q)| q.to_vec()).collect();
+    let holed = s.p("holed.obj");
+    point2quad::io::mesh_io::write_mesh(Path::new(&holed), &PolyMesh { vertices: t.vertices.clone(), faces: kept })
+        .unwrap();
+    let repaired = s.p("repaired.obj");
+    let out = ok(&["repair", &holed, "-o", &repaired, "--no-fill", "--watertight"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("watertight:") && err.contains("0 boundary loops"), "{err}");
+    assert!(border(&holed) > 0.0);
+    assert_eq!(border(&repaired), 0.0);
+}

@@ -754,7 +754,7 @@ fn put_back(mesh: &mut HalfedgeMesh, out: &[[VertexId; 4]]) {
 
 /// Adds all of `quads` or none of them; whether they went in. A quad `add_face` refuses
 /// at first (a corner whose fan it would split) is tried again after the others.
-fn add_all(mesh: &mut HalfedgeMesh, quads: &[[u32; 4]]) -> bool {
+pub(crate) fn add_all(mesh: &mut HalfedgeMesh, quads: &[[u32; 4]]) -> bool {
     let mut added: Vec<FaceId> = Vec::with_capacity(quads.len());
     let mut left: Vec<[u32; 4]> = quads.to_vec();
     while !left.is_empty() {

@@ -12,3 +12,4 @@ pub mod rescue;
 pub mod shapes;
 pub mod soup;
 pub mod validate;
+pub mod watertight;

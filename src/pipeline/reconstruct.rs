@@ -10,6 +10,7 @@
 use crate::mesh::halfedge::corner_set;
 use crate::mesh::poly::QuadMesh;
 use crate::mesh::postprocess::{postprocess_with_reserve, PostprocessConfig, PostprocessReport};
+use crate::mesh::watertight::{close_all, WatertightConfig, WatertightReport};
 use crate::pipeline::candidates::{generate, CandidateConfig};
 use crate::pipeline::features::face_input;
 use crate::pipeline::frame::Frame;
@@ -48,6 +49,12 @@ pub struct ReconstructConfig {
     /// [`SecondPassMode::Average`], [`SecondPassCover::Believed`]. Part of the
     /// post-process: ignored when `run_postprocess` is false.
     pub second_pass: Option<SecondPass>,
+    /// After the post-process (and the second pass), close every hole, odd ones paired
+    /// by split strips of the least believed faces, even ones filled with new vertices
+    /// ([`crate::mesh::watertight::close_all`]; not in the paper, session 32). `None`
+    /// (the default) leaves the loops the classifier's faces do not close. Part of the
+    /// post-process: ignored when `run_postprocess` is false.
+    pub watertight: Option<WatertightConfig>,
 }
 
 /// The second pass of [`reconstruct`] (session 26): after the first pass's
@@ -100,6 +107,7 @@ impl Default for ReconstructConfig {
                 mode: SecondPassMode::Average,
                 cover: SecondPassCover::Believed,
             }),
+            watertight: None,
         }
     }
 }
@@ -135,6 +143,8 @@ pub struct ReconstructReport {
     /// left): the first pass's mesh is then the output. `candidates` counts the first
     /// pass's candidates; `predicted` those above the threshold after the merge.
     pub second_pass_dropped: Option<usize>,
+    /// What the watertight closing did, when it ran ([`ReconstructConfig::watertight`]).
+    pub watertight: Option<WatertightReport>,
     /// (stage, seconds), in pipeline order.
     pub timings: Vec<(&'static str, f64)>,
 }
@@ -265,6 +275,7 @@ pub fn reconstruct_observed(
         };
         let first = (faces, face_probs, reserve, reserve_probs);
         let (mut mesh, mut pp) = post(&first)?;
+        let mut final_split: Option<Split> = None;
         let faces = &first.0;
         if let Some(sp) = &cfg.second_pass {
             clock.lap(&mut report, "postprocess");
@@ -300,8 +311,23 @@ pub fn reconstruct_observed(
                     report.second_pass_dropped = Some(u - kept.len());
                     last = Some("second postprocess");
                     (mesh, pp) = post(&second)?;
+                    final_split = Some(second);
                 }
             }
+        }
+        if let Some(wcfg) = &cfg.watertight {
+            if let Some(l) = last {
+                clock.lap(&mut report, l);
+            }
+            last = Some("watertight");
+            // Every candidate of the last scoring with its probability: the strips run
+            // through the least believed faces, and the rescue takes its quads there.
+            let (f, fp, r, rp) = final_split.as_ref().unwrap_or(&first);
+            let all: Vec<[u32; 4]> = f.iter().chain(r).copied().collect();
+            let all_p: Vec<f32> = fp.iter().chain(rp).copied().collect();
+            let (closed, wr) = close_all(&mesh, wcfg, &all, &all_p)?;
+            mesh = closed;
+            report.watertight = Some(wr);
         }
         report.vertices_added = mesh.vertices.len() - u;
         report.postprocess = Some(pp);

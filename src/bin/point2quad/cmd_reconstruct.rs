@@ -7,6 +7,7 @@ use point2quad::io::atomic::commit_all;
 use point2quad::io::mesh_io::{prepare_mesh_with, WriteOptions};
 use point2quad::io::points::read_points;
 use point2quad::mesh::poly::PolyMesh;
+use point2quad::mesh::watertight::WatertightConfig;
 use point2quad::pipeline::model::Model;
 use point2quad::pipeline::reconstruct::{
     reconstruct_observed, ReconstructConfig, SecondPass, SecondPassCover, SecondPassMode, StageDone,
@@ -109,6 +110,16 @@ OPTIONS:
                           those the classifier predicted real, `all` every face of the
                           first pass's mesh (rescued, filled and closing quads too)
                           [believed]
+    --watertight          close every hole at the end, at the price of faces that are
+                          not the classifier's: each odd loop is paired with another
+                          by splitting the strip of least believed faces between them
+                          (new vertices on the edges it crosses), then every even loop
+                          is filled, with new vertices where needed. For closed
+                          objects: an open surface's border is closed too, unless
+                          it is longer than --watertight-max-loop (default: off;
+                          session 32)
+    --watertight-max-loop N  with --watertight, loops of more than N edges stay open
+                          (0: none does) [0]
 ";
 
 const SPEC: Spec = Spec {
@@ -129,6 +140,7 @@ const SPEC: Spec = Spec {
         "--second-pass",
         "--second-pass-tau",
         "--second-pass-cover",
+        "--watertight-max-loop",
     ],
     switches: &[
         "--no-postprocess",
@@ -140,6 +152,7 @@ const SPEC: Spec = Spec {
         "--no-inverted-fills",
         "--no-untangle",
         "--progress",
+        "--watertight",
     ],
 };
 
@@ -243,6 +256,7 @@ pub fn run(argv: &[String]) -> Result<()> {
             "--second-pass",
             "--second-pass-tau",
             "--second-pass-cover",
+            "--watertight-max-loop",
         ];
         // Every switch but these two sets a post-process step.
         let mut switches = SPEC.switches.iter().filter(|o| !matches!(**o, "--no-postprocess" | "--progress"));
@@ -312,6 +326,17 @@ pub fn run(argv: &[String]) -> Result<()> {
             };
             cfg.second_pass = cfg.run_postprocess.then_some(SecondPass { tau, mode, cover });
         }
+    }
+    if a.switch("--watertight") {
+        let max_loop_edges = a.parsed_in(cmd, "--watertight-max-loop", 0usize, 0, usize::MAX, "a loop length")?;
+        cfg.watertight = Some(WatertightConfig { max_loop_edges, ..Default::default() });
+        if std::env::var("P2Q_WT_NORESCUE").is_ok() {
+            cfg.watertight.as_mut().unwrap().rescue_min_prob = None;
+        }
+    } else if a.value("--watertight-max-loop").is_some() {
+        return Err(Error::Usage(format!(
+            "{cmd}: --watertight-max-loop has no effect without --watertight; give both or neither"
+        )));
     }
     // Check the output names before the work, not after it.
     point2quad::io::mesh_io::MeshFormat::from_path(&out)?;
@@ -406,6 +431,12 @@ pub fn run(argv: &[String]) -> Result<()> {
         pp.close.untangled,
         out.display()
     ));
+    if let Some(w) = &rep.watertight {
+        crate::output::info(&format!(
+            "reconstruct: watertight: {} odd loop pair(s) joined by splitting {} face(s), {} loop(s) filled with {} quad(s), {} new vertices in all, {} loop(s) left open\n",
+            w.odd_pairs, w.faces_split, w.loops_filled, w.quads_added, w.vertices_added, w.loops_left
+        ));
+    }
     if cfg.second_pass.is_some() && cfg.run_postprocess {
         crate::output::info(&match rep.second_pass_dropped {
             Some(d) => format!(

@@ -7,6 +7,7 @@ use crate::args::{Args, Spec};
 use crate::output::say;
 use point2quad::io::mesh_io::{read_mesh, write_mesh, MeshFormat};
 use point2quad::mesh::poly::PolyMesh;
+use point2quad::mesh::watertight::{close_all, WatertightConfig};
 use point2quad::mesh::postprocess::{postprocess, PostprocessConfig};
 use point2quad::{Error, Result};
 
@@ -41,13 +42,21 @@ OPTIONS:
     --no-fill              skip step (c)
     --no-close             skip the odd-loop pairing and quadrangulation of step (c)
     --max-hole-edges N     leave boundary loops longer than N open (default 40)
+    --watertight           then close every loop still open: odd loops paired by
+                           splitting the strip of faces between them (new vertices on
+                           the edges it crosses; earlier faces count as more believed),
+                           even loops filled, with new vertices where needed; also the
+                           border of an open surface unless it is longer than
+                           --watertight-max-loop (session 32)
+    --watertight-max-loop N  with --watertight, loops of more than N edges stay open
+                           (0: none does) [0]
     -h, --help             this help
 ";
 
 pub fn run(argv: &[String]) -> Result<()> {
     let spec = Spec {
-        valued: &["-o", "--priority", "--score-limit", "--max-hole-edges"],
-        switches: &["--drop-non-quads", "--no-filter", "--no-fill", "--no-close"],
+        valued: &["-o", "--priority", "--score-limit", "--max-hole-edges", "--watertight-max-loop"],
+        switches: &["--drop-non-quads", "--no-filter", "--no-fill", "--no-close", "--watertight"],
     };
     let a = Args::parse("repair", argv, &spec)?;
     let input = &a.expect_positional("repair", 1, "one input mesh")?[0];
@@ -82,6 +91,16 @@ pub fn run(argv: &[String]) -> Result<()> {
         }
     };
 
+    let watertight = if a.switch("--watertight") {
+        let max_loop_edges = a.parsed_in("repair", "--watertight-max-loop", 0usize, 0, usize::MAX, "a loop length")?;
+        Some(WatertightConfig { max_loop_edges, ..Default::default() })
+    } else if a.value("--watertight-max-loop").is_some() {
+        return Err(Error::Usage(
+            "repair: --watertight-max-loop has no effect without --watertight; give both or neither".into(),
+        ));
+    } else {
+        None
+    };
     let poly = read_mesh(Path::new(input))?;
     // After the input (its errors come first), before the work.
     crate::output::check_output_path(Path::new(output))?;
@@ -98,8 +117,16 @@ pub fn run(argv: &[String]) -> Result<()> {
     let n = quads.quads.len();
     let probs: Vec<f32> =
         if uniform { vec![1.0; n] } else { (0..n).map(|i| 1.0 - i as f32 / (n.max(1) as f32)).collect() };
-    let (out, rep) = postprocess(&quads.vertices, &quads.quads, &probs, &cfg)
+    let (mut out, rep) = postprocess(&quads.vertices, &quads.quads, &probs, &cfg)
         .map_err(|e| Error::invalid(format!("{input}: {}", bare(e))))?;
+    let mut closed = None;
+    if let Some(w) = &watertight {
+        // The input's faces, with their priority as the belief.
+        let (m, r) = close_all(&out, w, &quads.quads, &probs)
+            .map_err(|e| Error::invalid(format!("{input}: {}", bare(e))))?;
+        out = m;
+        closed = Some(r);
+    }
     write_mesh(Path::new(output), &PolyMesh::from(&out))?;
 
     say!("repair {input} -> {output}");
@@ -139,12 +166,19 @@ pub fn run(argv: &[String]) -> Result<()> {
         );
     }
     say!("  components re-oriented (closed: outward; open: as most input faces): {}", rep.components_flipped);
-    say!(
-        "  output: {} vertices, {} quads, {} boundary loops",
-        out.vertices.len(),
-        rep.faces_out,
-        rep.boundary_loops_out
-    );
+    if let Some(w) = &closed {
+        say!(
+            "  watertight: {} odd loop pair(s) joined by splitting {} face(s), {} loop(s) filled with {} quad(s), {} new vertices, {} loop(s) left open",
+            w.odd_pairs,
+            w.faces_split,
+            w.loops_filled,
+            w.quads_added,
+            w.vertices_added,
+            w.loops_left
+        );
+    }
+    let loops_out = closed.as_ref().map_or(rep.boundary_loops_out, |w| w.loops_left);
+    say!("  output: {} vertices, {} quads, {} boundary loops", out.vertices.len(), out.quads.len(), loops_out);
     Ok(())
 }
 

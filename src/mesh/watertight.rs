@@ -1,0 +1,379 @@
+//! Closing every hole of a quad mesh (not in the paper; session 32; `reconstruct
+//! --watertight`, `repair --watertight`).
+//!
+//! The post-process closes a hole only where the classifier's faces allow it: an odd
+//! loop (a triangle, most often) can be closed by quads only together with another odd
+//! loop, and the faces between two odd loops are usually believed, so the seal leaves
+//! them (docs/EXPERIMENTS.md, "Session 27"). Users who need a closed mesh (simulation,
+//! 3-D printing) can ask for one at the price of faces that are not the classifier's:
+//!
+//! 1. **Odd loops are paired by splitting a strip of faces.** From an odd loop A, the
+//!    cheapest path of faces to another odd loop B (Dijkstra over faces, each costing
+//!    `0.05 + support`, so the least believed faces first) is cut along its middle: every
+//!    edge the path crosses, and A's and B's edges where it leaves and meets them, gets a
+//!    new vertex, and each face of the path is split into two quads (entry and exit edges
+//!    opposite) or three (adjacent: a new vertex in the middle of the face). The mesh
+//!    stays a manifold of quads; A and B each gain one edge and become even. Paths within
+//!    one round share no face; rounds repeat until no odd loop is left or none can be
+//!    paired (an odd loop whose component holds no other: impossible in a quad mesh, whose
+//!    border always has an even number of edges, so every component's odd loops pair up).
+//! 2. **Candidates are rescued** into the holes: those glued to the border on two or more
+//!    edges, most probable first, where they leave no more odd loops than they found
+//!    (quads over the input's points, which may be true faces).
+//! 3. **Even loops are filled**: by a quadrangulation over each loop's own vertices
+//!    ([`quadrangulate`], its shape bound only: fewest new faces, no new vertex), then
+//!    the greedy hole filling with new vertices ([`fill_holes`], partial fills kept),
+//!    then the quadrangulation again on what is left, then a fan around one new vertex at
+//!    the loop's centroid: quads `(v₀, v₁, v₂, c), (v₂, v₃, v₄, c), …`, which closes any
+//!    even loop that does not pass through a vertex twice.
+//!
+//! Only loops of at most `max_loop_edges` edges are touched (0: every loop). The input's
+//! vertices keep their positions and indices; new vertices are appended.
+
+use std::cmp::Ordering;
+use std::collections::{BinaryHeap, HashMap, HashSet};
+
+use super::close::{add_all, quadrangulate, CloseConfig};
+use super::halfedge::{corner_set, HalfedgeMesh};
+use super::handles::{FaceId, HalfedgeId};
+use super::hole_fill::{fill_holes, HoleFillConfig};
+use super::poly::QuadMesh;
+use super::rescue::{rescue_faces, RescueConfig};
+use crate::error::{Error, Result};
+use crate::math::{add, scale};
+
+/// Settings of [`close_all`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct WatertightConfig {
+    /// Loops with more edges stay open (the border of an open surface); 0 closes every
+    /// loop.
+    pub max_loop_edges: usize,
+    /// Rounds of odd-loop pairing (each pairs as many loops as face-disjoint paths allow).
+    pub max_rounds: usize,
+    /// Loops up to this many edges are tried by the quadrangulation over their own
+    /// vertices (its cost grows as the fourth power of the length); longer ones go to
+    /// the greedy filling and the fan only.
+    pub max_quadrangulate_edges: usize,
+    /// Before the filling, candidates scored at least this are put in at holes where
+    /// they glue to the border on two or more edges and leave no more odd loops than
+    /// they found ([`rescue_faces`] with `keep_parity`): quads over the input's points,
+    /// which may be true faces, where the filling would invent vertices. `None` skips it.
+    pub rescue_min_prob: Option<f32>,
+}
+
+impl Default for WatertightConfig {
+    fn default() -> Self {
+        WatertightConfig { max_loop_edges: 0, max_rounds: 8, max_quadrangulate_edges: 64, rescue_min_prob: Some(0.0) }
+    }
+}
+
+/// What [`close_all`] did.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct WatertightReport {
+    /// Pairs of odd loops made even by a split strip.
+    pub odd_pairs: usize,
+    /// Faces split on those strips (each into two or three quads).
+    pub faces_split: usize,
+    /// Candidates put in at holes before the filling.
+    pub rescued: usize,
+    /// Loops closed by the greedy hole filling, the quadrangulation or the fan.
+    pub loops_filled: usize,
+    /// Quads the filling added.
+    pub quads_added: usize,
+    /// Vertices added (strip splits, hole filling and fans).
+    pub vertices_added: usize,
+    /// Boundary loops still open at the end: those longer than the bound, and any the
+    /// filling could not close (through a vertex twice).
+    pub loops_left: usize,
+}
+
+/// Closes every hole of `mesh` (module docs). `candidates` (corner lists over `mesh`'s
+/// vertices) with their `probs` say how much each quad is believed (the classifier's
+/// probabilities; a face that is no candidate counts 0): the strips run through the
+/// least believed faces, and the rescue takes its quads from them. The result's first
+/// `mesh.vertices.len()` vertices are `mesh`'s, unchanged.
+///
+/// # Errors
+/// `InvalidInput` when `mesh` is not a manifold, oriented quad mesh (as
+/// [`HalfedgeMesh::from_quads`] checks it) or has a non-finite coordinate, or when the
+/// candidates and probabilities differ in number, a candidate's corner is out of range
+/// or a probability is not finite.
+pub fn close_all(
+    mesh: &QuadMesh,
+    cfg: &WatertightConfig,
+    candidates: &[[u32; 4]],
+    probs: &[f32],
+) -> Result<(QuadMesh, WatertightReport)> {
+    if let Some(i) = mesh.vertices.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
+        return Err(Error::invalid(format!("watertight: vertex {i} has a non-finite coordinate")));
+    }
+    if candidates.len() != probs.len() {
+        return Err(Error::invalid(format!(
+            "watertight: {} candidates but {} probabilities",
+            candidates.len(),
+            probs.len()
+        )));
+    }
+    let n = mesh.vertices.len();
+    if let Some(i) = candidates.iter().position(|q| q.iter().any(|&v| v as usize >= n)) {
+        return Err(Error::invalid(format!("watertight: candidate {i} has a corner beyond the {n} vertices")));
+    }
+    if let Some(i) = probs.iter().position(|p| !p.is_finite()) {
+        return Err(Error::invalid(format!("watertight: candidate {i} has a non-finite probability")));
+    }
+    let mut belief: HashMap<[u32; 4], f32> = HashMap::with_capacity(candidates.len());
+    for (&q, &p) in candidates.iter().zip(probs) {
+        let e = belief.entry(corner_set(q)).or_insert(p);
+        *e = e.max(p);
+    }
+    let support = |k: [u32; 4]| belief.get(&k).map_or(0.0, |&p| p as f64);
+    let mut pos = mesh.vertices.clone();
+    let mut quads = mesh.quads.clone();
+    let mut report = WatertightReport::default();
+    let limit = if cfg.max_loop_edges == 0 { usize::MAX } else { cfg.max_loop_edges };
+    for _ in 0..cfg.max_rounds {
+        let hm = HalfedgeMesh::from_quads(pos.len(), &quads)?;
+        let strips = pair_odd_loops(&hm, limit, &support);
+        if strips.is_empty() {
+            break;
+        }
+        report.odd_pairs += strips.len();
+        report.faces_split += strips.iter().map(|s| s.faces.len()).sum::<usize>();
+        quads = split_strips(&hm, &mut pos, &strips);
+    }
+    let mut hm = HalfedgeMesh::from_quads(pos.len(), &quads)?;
+    let faces_before = hm.n_faces();
+    let loops_before = open_loops(&hm, limit).len();
+    if let Some(min_prob) = cfg.rescue_min_prob {
+        let distinct = |q: &[u32; 4]| q.iter().collect::<HashSet<_>>().len() == 4;
+        let pool: Vec<usize> = (0..candidates.len()).filter(|&i| probs[i] >= min_prob && distinct(&candidates[i])).collect();
+        let rc = RescueConfig { min_prob, keep_parity: true, ..RescueConfig::default() };
+        report.rescued = rescue_faces(&mut hm, &pos, candidates, probs, &pool, &rc).len();
+    }
+    // Over the loops' own vertices first (fewest new faces, no new vertex), then the
+    // greedy filling with new vertices (partial fills kept: their quads are well shaped),
+    // then over own vertices again (what the filling left), then the fans.
+    let shape_only = CloseConfig { min_normal_dot: -1.0, ..CloseConfig::default() };
+    let own_vertices = |hm: &mut HalfedgeMesh, pos: &[[f64; 3]]| {
+        for lp in open_loops(hm, limit) {
+            let vs: Vec<u32> = lp.iter().map(|&h| hm.from_vertex(h).0).collect();
+            if vs.len() % 2 == 1 || has_repeat(&vs) || vs.len() > cfg.max_quadrangulate_edges {
+                continue;
+            }
+            let across = vec![None; vs.len()];
+            if let Some(q) = quadrangulate(hm, pos, &vs, &across, &shape_only) {
+                add_all(hm, &q);
+            }
+        }
+    };
+    own_vertices(&mut hm, &pos);
+    let fill = HoleFillConfig { max_hole_edges: limit, undo_partial_fills: false, ..HoleFillConfig::default() };
+    fill_holes(&mut hm, &mut pos, &fill)?;
+    own_vertices(&mut hm, &pos);
+    for lp in open_loops(&hm, limit) {
+        let vs: Vec<u32> = lp.iter().map(|&h| hm.from_vertex(h).0).collect();
+        if vs.len() % 2 == 0 && !has_repeat(&vs) {
+            fan(&mut hm, &mut pos, &vs);
+        }
+    }
+    report.loops_filled = loops_before.saturating_sub(open_loops(&hm, limit).len());
+    report.loops_left = hm.boundary_loops().len();
+    report.quads_added = hm.n_faces() - faces_before;
+    report.vertices_added = pos.len() - mesh.vertices.len();
+    Ok((hm.to_quad_mesh(&pos)?, report))
+}
+
+/// The boundary loops of at most `limit` edges.
+fn open_loops(hm: &HalfedgeMesh, limit: usize) -> Vec<Vec<HalfedgeId>> {
+    hm.boundary_loops().into_iter().filter(|l| l.len() <= limit).collect()
+}
+
+fn has_repeat(vs: &[u32]) -> bool {
+    let set: HashSet<u32> = vs.iter().copied().collect();
+    set.len() != vs.len()
+}
+
+/// Closes the even loop `vs` (from-vertices of its boundary half-edges, in order) by a
+/// fan of quads around a new vertex at its centroid; no face changes when they do not
+/// all go in.
+fn fan(hm: &mut HalfedgeMesh, pos: &mut Vec<[f64; 3]>, vs: &[u32]) {
+    let n = vs.len();
+    let centre = scale(vs.iter().fold([0.0; 3], |s, &v| add(s, pos[v as usize])), 1.0 / n as f64);
+    let c = hm.add_vertex();
+    pos.push(centre);
+    let quads: Vec<[u32; 4]> = (0..n / 2).map(|i| [vs[2 * i], vs[2 * i + 1], vs[(2 * i + 2) % n], c.0]).collect();
+    // When they do not go in, the vertex stays, isolated (no face uses it).
+    add_all(hm, &quads);
+}
+
+/// One strip to split: its faces from the first odd loop to the second, with the
+/// half-edge (of that face) through which each is entered and left.
+struct Strip {
+    faces: Vec<FaceId>,
+    entry: Vec<HalfedgeId>,
+    exit: Vec<HalfedgeId>,
+}
+
+#[derive(PartialEq)]
+struct Item(f64, u32);
+impl Eq for Item {}
+impl PartialOrd for Item {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for Item {
+    fn cmp(&self, o: &Self) -> Ordering {
+        o.0.total_cmp(&self.0).then(o.1.cmp(&self.1))
+    }
+}
+
+/// Face-disjoint strips pairing the odd loops of at most `limit` edges, shortest loops
+/// first.
+fn pair_odd_loops(hm: &HalfedgeMesh, limit: usize, support: &dyn Fn([u32; 4]) -> f64) -> Vec<Strip> {
+    let loops = open_loops(hm, limit);
+    // Boundary half-edge → index of its odd loop.
+    let mut odd_of: HashMap<u32, usize> = HashMap::new();
+    let mut odd: Vec<usize> = Vec::new();
+    for (i, lp) in loops.iter().enumerate() {
+        if lp.len() % 2 == 1 {
+            odd.push(i);
+            for h in lp {
+                odd_of.insert(h.0, i);
+            }
+        }
+    }
+    odd.sort_by_key(|&i| (loops[i].len(), loops[i][0].0));
+    let cost = |f: FaceId| 0.05 + support(corner_set(hm.face_vertices(f).map(|v| v.0))).max(0.0);
+    let mut used_face: HashSet<u32> = HashSet::new();
+    let mut used_loop: HashSet<usize> = HashSet::new();
+    let mut strips = Vec::new();
+    for &a in &odd {
+        if used_loop.contains(&a) {
+            continue;
+        }
+        // Dijkstra over faces; per face: (cost, parent, entry half-edge).
+        let mut best: HashMap<u32, (f64, Option<FaceId>, HalfedgeId)> = HashMap::new();
+        let mut heap = BinaryHeap::new();
+        for &h in &loops[a] {
+            let g = h.opposite();
+            if let Some(f) = hm.face(g) {
+                if used_face.contains(&f.0) {
+                    continue;
+                }
+                let c = cost(f);
+                if best.get(&f.0).map_or(true, |b| c < b.0) {
+                    best.insert(f.0, (c, None, g));
+                    heap.push(Item(c, f.0));
+                }
+            }
+        }
+        let mut done: HashSet<u32> = HashSet::new();
+        let mut found: Option<(FaceId, HalfedgeId, usize)> = None;
+        while let Some(Item(c, f)) = heap.pop() {
+            if !done.insert(f) {
+                continue;
+            }
+            let face = FaceId(f);
+            let entry = best[&f].2;
+            // A side of this face on another odd loop, not yet paired, ends the strip.
+            let end = hm.face_halfedges(face).into_iter().find_map(|g| {
+                let b = *odd_of.get(&g.opposite().0)?;
+                (g != entry && b != a && !used_loop.contains(&b)).then_some((g, b))
+            });
+            if let Some((g, b)) = end {
+                found = Some((face, g, b));
+                break;
+            }
+            for g in hm.face_halfedges(face) {
+                if let Some(n) = hm.face(g.opposite()) {
+                    if used_face.contains(&n.0) || done.contains(&n.0) {
+                        continue;
+                    }
+                    let nc = c + cost(n);
+                    if best.get(&n.0).map_or(true, |b| nc < b.0) {
+                        best.insert(n.0, (nc, Some(face), g.opposite()));
+                        heap.push(Item(nc, n.0));
+                    }
+                }
+            }
+        }
+        let Some((last, out, b)) = found else { continue };
+        let mut faces = vec![last];
+        let mut entry = vec![best[&last.0].2];
+        let mut exit = vec![out];
+        let mut cur = last;
+        while let Some(p) = best[&cur.0].1 {
+            exit.push(best[&cur.0].2.opposite());
+            faces.push(p);
+            entry.push(best[&p.0].2);
+            cur = p;
+        }
+        faces.reverse();
+        entry.reverse();
+        exit.reverse();
+        used_face.extend(faces.iter().map(|f| f.0));
+        used_loop.insert(a);
+        used_loop.insert(b);
+        strips.push(Strip { faces, entry, exit });
+    }
+    strips
+}
+
+/// The quads of `hm` with every strip's faces split (module docs); new vertices are
+/// appended to `pos`.
+fn split_strips(hm: &HalfedgeMesh, pos: &mut Vec<[f64; 3]>, strips: &[Strip]) -> Vec<[u32; 4]> {
+    let on_strip: HashSet<u32> = strips.iter().flat_map(|s| s.faces.iter().map(|f| f.0)).collect();
+    let mut out: Vec<[u32; 4]> =
+        hm.faces().filter(|f| !on_strip.contains(&f.0)).map(|f| hm.face_vertices(f).map(|v| v.0)).collect();
+    for s in strips {
+        // One new vertex per crossed edge: at its midpoint inside the strip; where the
+        // strip leaves or meets a loop, moved a quarter of the way towards the face's
+        // centre, so that the quad that later closes the loop has no straight corner.
+        let mut mid: HashMap<usize, u32> = HashMap::new();
+        let n = s.faces.len();
+        for (i, &f) in s.faces.iter().enumerate() {
+            let corners = hm.face_vertices(f);
+            let centre = scale(corners.iter().fold([0.0; 3], |acc, v| add(acc, pos[v.idx()])), 0.25);
+            for (g, at_loop) in [(s.entry[i], i == 0), (s.exit[i], i + 1 == n)] {
+                mid.entry(g.edge()).or_insert_with(|| {
+                    let m = scale(add(pos[hm.from_vertex(g).idx()], pos[hm.to_vertex(g).idx()]), 0.5);
+                    let p = if at_loop { add(scale(m, 0.75), scale(centre, 0.25)) } else { m };
+                    pos.push(p);
+                    (pos.len() - 1) as u32
+                });
+            }
+            let hs = hm.face_halfedges(f);
+            let j = hs.iter().position(|&h| h == s.entry[i]).expect("entry half-edge of the face");
+            let k = hs.iter().position(|&h| h == s.exit[i]).expect("exit half-edge of the face");
+            let q = |t: usize| corners[(j + t) % 4].0;
+            let a = mid[&s.entry[i].edge()];
+            let b = mid[&s.exit[i].edge()];
+            match (k + 4 - j) % 4 {
+                2 => {
+                    // Entry q0→q1, exit q2→q3.
+                    out.push([q(0), a, b, q(3)]);
+                    out.push([a, q(1), q(2), b]);
+                }
+                1 => {
+                    // Entry q0→q1, exit q1→q2: three quads around a centre vertex.
+                    pos.push(centre);
+                    let c = (pos.len() - 1) as u32;
+                    out.push([q(0), a, c, q(3)]);
+                    out.push([a, q(1), b, c]);
+                    out.push([c, b, q(2), q(3)]);
+                }
+                3 => {
+                    // Entry q0→q1, exit q3→q0.
+                    pos.push(centre);
+                    let c = (pos.len() - 1) as u32;
+                    out.push([q(0), a, c, b]);
+                    out.push([a, q(1), q(2), c]);
+                    out.push([c, q(2), q(3), b]);
+                }
+                _ => unreachable!("a strip enters and leaves a face through different sides"),
+            }
+        }
+    }
+    out
+}

@@ -1610,10 +1610,14 @@ fn reconstruct_and_repair_watertight() {
     assert!(!Path::new(&never).exists());
 
     let t = shapes::torus(16, 8, 3.0, 1.0);
-    let kept: Vec<Vec<u32>> = t.quads.iter().enumerate().filter(|(i, _)| i % 7 != 3).map(|(_, q)| q.to_vec()).collect();
+    let kept: Vec<Vec<u32>> =
+        t.quads.iter().enumerate().filter(|(i, _)| i % 7 != 3).map(|(_, q)| q.to_vec()).collect();
     let holed = s.p("holed.obj");
-    point2quad::io::mesh_io::write_mesh(Path::new(&holed), &PolyMesh { vertices: t.vertices.clone(), faces: kept })
-        .unwrap();
+    point2quad::io::mesh_io::write_mesh(
+        Path::new(&holed),
+        &PolyMesh { vertices: t.vertices.clone(), faces: kept },
+    )
+    .unwrap();
     let repaired = s.p("repaired.obj");
     let out = ok(&["repair", &holed, "-o", &repaired, "--no-fill", "--watertight"]);
     let err = String::from_utf8_lossy(&out.stderr);

@@ -50,7 +50,9 @@ fn damaged(shape: &QuadMesh, kites: usize, share: f64, seed: u64) -> (QuadMesh, 
             continue;
         }
         let before = m.clone();
-        if m.remove_faces(&[f1, f2]).len() != 2 || m.add_face(q.map(point2quad::mesh::handles::VertexId)).is_err() {
+        if m.remove_faces(&[f1, f2]).len() != 2
+            || m.add_face(q.map(point2quad::mesh::handles::VertexId)).is_err()
+        {
             m = before;
             continue;
         }
@@ -76,7 +78,12 @@ fn keys(m: &QuadMesh) -> HashSet<[u32; 4]> {
 /// `chi`: valid, closed, pure quads over distinct corners, the input's vertices first
 /// and bit for bit, the input's faces all there but the split ones, and the shape's
 /// Euler characteristic.
-fn check_closed(input: &QuadMesh, out: &QuadMesh, r: &WatertightReport, chi: i64) -> Result<(), TestCaseError> {
+fn check_closed(
+    input: &QuadMesh,
+    out: &QuadMesh,
+    r: &WatertightReport,
+    chi: i64,
+) -> Result<(), TestCaseError> {
     let hm = HalfedgeMesh::from_quads(out.vertices.len(), &out.quads).unwrap();
     validate(&hm).unwrap();
     prop_assert!(hm.boundary_loops().is_empty(), "{} loops left open; {:?}", hm.boundary_loops().len(), r);
@@ -136,7 +143,12 @@ fn a_kite_between_two_triangles_is_split_and_both_closed() {
     let m = HalfedgeMesh::from_quads(g.vertices.len(), &g.quads).unwrap();
     // An interior edge: the one between faces 14 and 15 (row 2, columns 2 and 3).
     let id = |i: u32, j: u32| j * 7 + i;
-    let h = m.find_halfedge(point2quad::mesh::handles::VertexId(id(3, 2)), point2quad::mesh::handles::VertexId(id(3, 3))).unwrap();
+    let h = m
+        .find_halfedge(
+            point2quad::mesh::handles::VertexId(id(3, 2)),
+            point2quad::mesh::handles::VertexId(id(3, 3)),
+        )
+        .unwrap();
     let h = if m.face(h).is_some() && m.face(h.opposite()).is_some() { h } else { panic!("interior edge") };
     let (f1, f2, q) = kite(&m, h).unwrap();
     let mut m2 = m.clone();
@@ -179,7 +191,8 @@ fn strips_avoid_believed_faces() {
     assert!(keys(&out).contains(&k), "{r:?}");
     assert!(r.faces_split >= 2, "{r:?}");
     let others: Vec<[u32; 4]> = input.quads.iter().copied().filter(|&q| corner_set(q) != k).collect();
-    let (out, r) = close_all(&input, &WatertightConfig::default(), &others, &vec![0.99; others.len()]).unwrap();
+    let (out, r) =
+        close_all(&input, &WatertightConfig::default(), &others, &vec![0.99; others.len()]).unwrap();
     assert!(!keys(&out).contains(&k), "{r:?}");
     assert_eq!(r.faces_split, 1, "{r:?}");
 }

@@ -36,7 +36,8 @@ use std::collections::{BinaryHeap, HashMap, HashSet};
 use super::close::{add_all, quadrangulate, CloseConfig};
 use super::halfedge::{corner_set, HalfedgeMesh};
 use super::handles::{FaceId, HalfedgeId};
-use super::hole_fill::{fill_holes, HoleFillConfig};
+use super::hole_fill::{fill_holes, scaled_jacobian, HoleFillConfig};
+use super::quality::is_degenerate_quad;
 use super::poly::QuadMesh;
 use super::rescue::{rescue_faces, RescueConfig};
 use crate::error::{Error, Result};
@@ -59,11 +60,20 @@ pub struct WatertightConfig {
     /// they found ([`rescue_faces`] with `keep_parity`): quads over the input's points,
     /// which may be true faces, where the filling would invent vertices. `None` skips it.
     pub rescue_min_prob: Option<f32>,
+    /// Steps of Laplacian smoothing of the added vertices at the end; a move is kept only
+    /// when the worst scaled Jacobian of the vertex's quads does not drop.
+    pub smoothing_steps: usize,
 }
 
 impl Default for WatertightConfig {
     fn default() -> Self {
-        WatertightConfig { max_loop_edges: 0, max_rounds: 8, max_quadrangulate_edges: 64, rescue_min_prob: Some(0.0) }
+        WatertightConfig {
+            max_loop_edges: 0,
+            max_rounds: 8,
+            max_quadrangulate_edges: 64,
+            rescue_min_prob: Some(0.0),
+            smoothing_steps: 10,
+        }
     }
 }
 
@@ -116,7 +126,9 @@ pub fn close_all(
     }
     let n = mesh.vertices.len();
     if let Some(i) = candidates.iter().position(|q| q.iter().any(|&v| v as usize >= n)) {
-        return Err(Error::invalid(format!("watertight: candidate {i} has a corner beyond the {n} vertices")));
+        return Err(Error::invalid(format!(
+            "watertight: candidate {i} has a corner beyond the {n} vertices"
+        )));
     }
     if let Some(i) = probs.iter().position(|p| !p.is_finite()) {
         return Err(Error::invalid(format!("watertight: candidate {i} has a non-finite probability")));
@@ -146,7 +158,8 @@ pub fn close_all(
     let loops_before = open_loops(&hm, limit).len();
     if let Some(min_prob) = cfg.rescue_min_prob {
         let distinct = |q: &[u32; 4]| q.iter().collect::<HashSet<_>>().len() == 4;
-        let pool: Vec<usize> = (0..candidates.len()).filter(|&i| probs[i] >= min_prob && distinct(&candidates[i])).collect();
+        let pool: Vec<usize> =
+            (0..candidates.len()).filter(|&i| probs[i] >= min_prob && distinct(&candidates[i])).collect();
         let rc = RescueConfig { min_prob, keep_parity: true, ..RescueConfig::default() };
         report.rescued = rescue_faces(&mut hm, &pos, candidates, probs, &pool, &rc).len();
     }
@@ -167,7 +180,8 @@ pub fn close_all(
         }
     };
     own_vertices(&mut hm, &pos);
-    let fill = HoleFillConfig { max_hole_edges: limit, undo_partial_fills: false, ..HoleFillConfig::default() };
+    let fill =
+        HoleFillConfig { max_hole_edges: limit, undo_partial_fills: false, ..HoleFillConfig::default() };
     fill_holes(&mut hm, &mut pos, &fill)?;
     own_vertices(&mut hm, &pos);
     for lp in open_loops(&hm, limit) {
@@ -176,11 +190,46 @@ pub fn close_all(
             fan(&mut hm, &mut pos, &vs);
         }
     }
+    smooth_added(&hm, &mut pos, mesh.vertices.len(), cfg.smoothing_steps);
     report.loops_filled = loops_before.saturating_sub(open_loops(&hm, limit).len());
     report.loops_left = hm.boundary_loops().len();
     report.quads_added = hm.n_faces() - faces_before;
     report.vertices_added = pos.len() - mesh.vertices.len();
     Ok((hm.to_quad_mesh(&pos)?, report))
+}
+
+/// Guarded Laplacian smoothing of the vertices from `first` on: each moves to the mean
+/// of its neighbours when that does not lower the worst scaled Jacobian of its quads.
+fn smooth_added(hm: &HalfedgeMesh, pos: &mut [[f64; 3]], first: usize, steps: usize) {
+    let worst = |pos: &[[f64; 3]], faces: &[[usize; 4]]| {
+        faces
+            .iter()
+            .map(|q| {
+                let p = q.map(|v| pos[v]);
+                if is_degenerate_quad(&p) {
+                    f64::NEG_INFINITY
+                } else {
+                    scaled_jacobian(&p)
+                }
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    for _ in 0..steps {
+        for v in first..pos.len() {
+            let vid = super::handles::VertexId(v as u32);
+            let nbrs: Vec<usize> = hm.vertex_outgoing(vid).map(|h| hm.to_vertex(h).idx()).collect();
+            if nbrs.is_empty() {
+                continue;
+            }
+            let faces: Vec<[usize; 4]> = hm.vertex_faces(vid).map(|f| hm.face_vertices(f).map(|x| x.idx())).collect();
+            let before = worst(pos, &faces);
+            let old = pos[v];
+            pos[v] = scale(nbrs.iter().fold([0.0; 3], |s, &n| add(s, pos[n])), 1.0 / nbrs.len() as f64);
+            if worst(pos, &faces) < before {
+                pos[v] = old;
+            }
+        }
+    }
 }
 
 /// The boundary loops of at most `limit` edges.
@@ -201,7 +250,8 @@ fn fan(hm: &mut HalfedgeMesh, pos: &mut Vec<[f64; 3]>, vs: &[u32]) {
     let centre = scale(vs.iter().fold([0.0; 3], |s, &v| add(s, pos[v as usize])), 1.0 / n as f64);
     let c = hm.add_vertex();
     pos.push(centre);
-    let quads: Vec<[u32; 4]> = (0..n / 2).map(|i| [vs[2 * i], vs[2 * i + 1], vs[(2 * i + 2) % n], c.0]).collect();
+    let quads: Vec<[u32; 4]> =
+        (0..n / 2).map(|i| [vs[2 * i], vs[2 * i + 1], vs[(2 * i + 2) % n], c.0]).collect();
     // When they do not go in, the vertex stays, isolated (no face uses it).
     add_all(hm, &quads);
 }

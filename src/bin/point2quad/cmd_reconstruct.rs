@@ -328,10 +328,14 @@ pub fn run(argv: &[String]) -> Result<()> {
         }
     }
     if a.switch("--watertight") {
-        let max_loop_edges = a.parsed_in(cmd, "--watertight-max-loop", 0usize, 0, usize::MAX, "a loop length")?;
+        let max_loop_edges =
+            a.parsed_in(cmd, "--watertight-max-loop", 0usize, 0, usize::MAX, "a loop length")?;
         cfg.watertight = Some(WatertightConfig { max_loop_edges, ..Default::default() });
         if std::env::var("P2Q_WT_NORESCUE").is_ok() {
             cfg.watertight.as_mut().unwrap().rescue_min_prob = None;
+        }
+        if std::env::var("P2Q_WT_NOSMOOTH").is_ok() {
+            cfg.watertight.as_mut().unwrap().smoothing_steps = 0;
         }
     } else if a.value("--watertight-max-loop").is_some() {
         return Err(Error::Usage(format!(

@@ -7,8 +7,8 @@ use crate::args::{Args, Spec};
 use crate::output::say;
 use point2quad::io::mesh_io::{read_mesh, write_mesh, MeshFormat};
 use point2quad::mesh::poly::PolyMesh;
-use point2quad::mesh::watertight::{close_all, WatertightConfig};
 use point2quad::mesh::postprocess::{postprocess, PostprocessConfig};
+use point2quad::mesh::watertight::{close_all, WatertightConfig};
 use point2quad::{Error, Result};
 
 pub const HELP: &str = "\
@@ -92,7 +92,8 @@ pub fn run(argv: &[String]) -> Result<()> {
     };
 
     let watertight = if a.switch("--watertight") {
-        let max_loop_edges = a.parsed_in("repair", "--watertight-max-loop", 0usize, 0, usize::MAX, "a loop length")?;
+        let max_loop_edges =
+            a.parsed_in("repair", "--watertight-max-loop", 0usize, 0, usize::MAX, "a loop length")?;
         Some(WatertightConfig { max_loop_edges, ..Default::default() })
     } else if a.value("--watertight-max-loop").is_some() {
         return Err(Error::Usage(
@@ -178,7 +179,12 @@ pub fn run(argv: &[String]) -> Result<()> {
         );
     }
     let loops_out = closed.as_ref().map_or(rep.boundary_loops_out, |w| w.loops_left);
-    say!("  output: {} vertices, {} quads, {} boundary loops", out.vertices.len(), out.quads.len(), loops_out);
+    say!(
+        "  output: {} vertices, {} quads, {} boundary loops",
+        out.vertices.len(),
+        out.quads.len(),
+        loops_out
+    );
     Ok(())
 }
 

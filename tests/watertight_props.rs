@@ -171,11 +171,13 @@ fn a_kite_between_two_triangles_is_split_and_both_closed() {
         (1, 1, 2, 2, 2, 1),
         "{r:?}"
     );
+    assert_eq!(r.longest_loop, 4, "the border is beyond the bound: {r:?}");
     assert!(!keys(&out).contains(&corner_set(q)), "the kite is split");
     assert_eq!(out.quads.len(), input.quads.len() - 1 + 2 + 2);
     // Without a bound the border is closed too (the user asked for a closed mesh).
     let (all, r) = close_all(&input, &WatertightConfig::default(), &[], &[]).unwrap();
     assert!(border(&all).is_empty(), "{r:?}");
+    assert_eq!(r.longest_loop, 24, "{r:?}");
 }
 
 /// The strips run through the least believed faces: with the kite believed and the rest

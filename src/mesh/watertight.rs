@@ -37,8 +37,8 @@ use super::close::{add_all, quadrangulate, CloseConfig};
 use super::halfedge::{corner_set, HalfedgeMesh};
 use super::handles::{FaceId, HalfedgeId};
 use super::hole_fill::{fill_holes, scaled_jacobian, HoleFillConfig};
-use super::quality::is_degenerate_quad;
 use super::poly::QuadMesh;
+use super::quality::is_degenerate_quad;
 use super::rescue::{rescue_faces, RescueConfig};
 use crate::error::{Error, Result};
 use crate::math::{add, scale};
@@ -88,7 +88,10 @@ pub struct WatertightReport {
     pub rescued: usize,
     /// Loops closed by the greedy hole filling, the quadrangulation or the fan.
     pub loops_filled: usize,
-    /// Quads the filling added.
+    /// Edges of the longest loop the filling met (after the strips): where that is the
+    /// border of an open surface, `max_loop_edges` keeps it open.
+    pub longest_loop: usize,
+    /// Quads the filling added (the rescued candidates not counted).
     pub quads_added: usize,
     /// Vertices added (strip splits, hole filling and fans).
     pub vertices_added: usize,
@@ -155,7 +158,9 @@ pub fn close_all(
     }
     let mut hm = HalfedgeMesh::from_quads(pos.len(), &quads)?;
     let faces_before = hm.n_faces();
-    let loops_before = open_loops(&hm, limit).len();
+    let open_before = open_loops(&hm, limit);
+    let loops_before = open_before.len();
+    report.longest_loop = open_before.iter().map(Vec::len).max().unwrap_or(0);
     if let Some(min_prob) = cfg.rescue_min_prob {
         let distinct = |q: &[u32; 4]| q.iter().collect::<HashSet<_>>().len() == 4;
         let pool: Vec<usize> =
@@ -193,7 +198,7 @@ pub fn close_all(
     smooth_added(&hm, &mut pos, mesh.vertices.len(), cfg.smoothing_steps);
     report.loops_filled = loops_before.saturating_sub(open_loops(&hm, limit).len());
     report.loops_left = hm.boundary_loops().len();
-    report.quads_added = hm.n_faces() - faces_before;
+    report.quads_added = hm.n_faces() - faces_before - report.rescued;
     report.vertices_added = pos.len() - mesh.vertices.len();
     Ok((hm.to_quad_mesh(&pos)?, report))
 }
@@ -221,7 +226,8 @@ fn smooth_added(hm: &HalfedgeMesh, pos: &mut [[f64; 3]], first: usize, steps: us
             if nbrs.is_empty() {
                 continue;
             }
-            let faces: Vec<[usize; 4]> = hm.vertex_faces(vid).map(|f| hm.face_vertices(f).map(|x| x.idx())).collect();
+            let faces: Vec<[usize; 4]> =
+                hm.vertex_faces(vid).map(|f| hm.face_vertices(f).map(|x| x.idx())).collect();
             let before = worst(pos, &faces);
             let old = pos[v];
             pos[v] = scale(nbrs.iter().fold([0.0; 3], |s, &n| add(s, pos[n])), 1.0 / nbrs.len() as f64);

@@ -437,8 +437,8 @@ pub fn run(argv: &[String]) -> Result<()> {
     ));
     if let Some(w) = &rep.watertight {
         crate::output::info(&format!(
-            "reconstruct: watertight: {} odd loop pair(s) joined by splitting {} face(s), {} loop(s) filled with {} quad(s), {} new vertices in all, {} loop(s) left open\n",
-            w.odd_pairs, w.faces_split, w.loops_filled, w.quads_added, w.vertices_added, w.loops_left
+            "reconstruct: watertight: {} odd loop pair(s) joined by splitting {} face(s), {} candidate(s) put in at holes, {} loop(s) filled with {} quad(s) (the longest {} edges), {} new vertices in all, {} loop(s) left open\n",
+            w.odd_pairs, w.faces_split, w.rescued, w.loops_filled, w.quads_added, w.longest_loop, w.vertices_added, w.loops_left
         ));
     }
     if cfg.second_pass.is_some() && cfg.run_postprocess {

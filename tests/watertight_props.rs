@@ -222,9 +222,9 @@ fn closed_meshes_pass_through_and_bad_coordinates_are_refused() {
     }
 }
 
-/// The rescue: a hole left where the four faces around a vertex were taken out is
-/// closed by those faces when they are candidates (the vertex in the middle is used
-/// again, nothing is invented), and over the hole's own border without them.
+/// The rescue (when asked for): a hole left where the four faces around a vertex were
+/// taken out is closed by those faces when they are candidates (the vertex in the middle
+/// is used again, nothing is invented), and over the hole's own border without them.
 #[test]
 fn candidates_fill_a_hole_before_anything_is_invented() {
     let s = cube_sphere(4);
@@ -237,14 +237,19 @@ fn candidates_fill_a_hole_before_anything_is_invented() {
     let taken: Vec<[u32; 4]> = around.iter().map(|&f| m.face_vertices(f).map(|v| v.0)).collect();
     assert_eq!(m.remove_faces(&around).len(), 4);
     let input = m.to_quad_mesh(&s.vertices).unwrap();
-    let (out, r) = close_all(&input, &WatertightConfig::default(), &taken, &[0.3; 4]).unwrap();
+    let rescue = WatertightConfig { rescue_min_prob: Some(0.0), ..Default::default() };
+    let (out, r) = close_all(&input, &rescue, &taken, &[0.3; 4]).unwrap();
     assert_eq!(keys(&out), keys(&s), "{r:?}");
     assert_eq!((r.rescued, r.vertices_added, r.loops_left), (4, 0, 0), "{r:?}");
-    let (out, r) = close_all(&input, &WatertightConfig::default(), &[], &[]).unwrap();
+    let (out, r) = close_all(&input, &rescue, &[], &[]).unwrap();
     assert_eq!((r.rescued, r.quads_added, r.vertices_added, r.loops_left), (0, 3, 0, 0), "{r:?}");
+    // Off by default: the same without candidates.
+    let (out2, r) = close_all(&input, &WatertightConfig::default(), &taken, &[0.3; 4]).unwrap();
+    assert_eq!((r.rescued, r.quads_added), (0, 3), "{r:?}");
+    assert_eq!(out2, out);
     assert!(out.quads.iter().all(|q| !q.contains(&centre.0)));
     // Not rescued below the bound.
-    let cfg = WatertightConfig { rescue_min_prob: Some(0.5), ..Default::default() };
+    let cfg = WatertightConfig { rescue_min_prob: Some(0.5), ..rescue };
     let (_, r) = close_all(&input, &cfg, &taken, &[0.3; 4]).unwrap();
     assert_eq!(r.rescued, 0, "{r:?}");
 }

@@ -17,15 +17,17 @@
 //!    one round share no face; rounds repeat until no odd loop is left or none can be
 //!    paired (an odd loop whose component holds no other: impossible in a quad mesh, whose
 //!    border always has an even number of edges, so every component's odd loops pair up).
-//! 2. **Candidates are rescued** into the holes: those glued to the border on two or more
-//!    edges, most probable first, where they leave no more odd loops than they found
-//!    (quads over the input's points, which may be true faces).
+//! 2. **Candidates are rescued** into the holes, when asked for
+//!    ([`WatertightConfig::rescue_min_prob`], off by default): those glued to the border
+//!    on two or more edges, most probable first, where they leave no more odd loops than
+//!    they found (quads over the input's points, which may be true faces).
 //! 3. **Even loops are filled**: by a quadrangulation over each loop's own vertices
 //!    ([`quadrangulate`], its shape bound only: fewest new faces, no new vertex), then
 //!    the greedy hole filling with new vertices ([`fill_holes`], partial fills kept),
 //!    then the quadrangulation again on what is left, then a fan around one new vertex at
 //!    the loop's centroid: quads `(v₀, v₁, v₂, c), (v₂, v₃, v₄, c), …`, which closes any
 //!    even loop that does not pass through a vertex twice.
+//! 4. The added vertices are smoothed (guarded Laplacian steps).
 //!
 //! Only loops of at most `max_loop_edges` edges are touched (0: every loop). The input's
 //! vertices keep their positions and indices; new vertices are appended.
@@ -58,7 +60,9 @@ pub struct WatertightConfig {
     /// Before the filling, candidates scored at least this are put in at holes where
     /// they glue to the border on two or more edges and leave no more odd loops than
     /// they found ([`rescue_faces`] with `keep_parity`): quads over the input's points,
-    /// which may be true faces, where the filling would invent vertices. `None` skips it.
+    /// which may be true faces, where the filling would invent vertices. `None` (the
+    /// default) skips it: on the held-out `train/` meshes it scored no better than
+    /// without it (docs/EXPERIMENTS.md, "Session 32", rule 1).
     pub rescue_min_prob: Option<f32>,
     /// Steps of Laplacian smoothing of the added vertices at the end; a move is kept only
     /// when the worst scaled Jacobian of the vertex's quads does not drop.
@@ -71,7 +75,7 @@ impl Default for WatertightConfig {
             max_loop_edges: 0,
             max_rounds: 8,
             max_quadrangulate_edges: 64,
-            rescue_min_prob: Some(0.0),
+            rescue_min_prob: None,
             smoothing_steps: 10,
         }
     }

@@ -331,12 +331,6 @@ pub fn run(argv: &[String]) -> Result<()> {
         let max_loop_edges =
             a.parsed_in(cmd, "--watertight-max-loop", 0usize, 0, usize::MAX, "a loop length")?;
         cfg.watertight = Some(WatertightConfig { max_loop_edges, ..Default::default() });
-        if std::env::var("P2Q_WT_NORESCUE").is_ok() {
-            cfg.watertight.as_mut().unwrap().rescue_min_prob = None;
-        }
-        if std::env::var("P2Q_WT_NOSMOOTH").is_ok() {
-            cfg.watertight.as_mut().unwrap().smoothing_steps = 0;
-        }
     } else if a.value("--watertight-max-loop").is_some() {
         return Err(Error::Usage(format!(
             "{cmd}: --watertight-max-loop has no effect without --watertight; give both or neither"
@@ -437,8 +431,8 @@ pub fn run(argv: &[String]) -> Result<()> {
     ));
     if let Some(w) = &rep.watertight {
         crate::output::info(&format!(
-            "reconstruct: watertight: {} odd loop pair(s) joined by splitting {} face(s), {} candidate(s) put in at holes, {} loop(s) filled with {} quad(s) (the longest {} edges), {} new vertices in all, {} loop(s) left open\n",
-            w.odd_pairs, w.faces_split, w.rescued, w.loops_filled, w.quads_added, w.longest_loop, w.vertices_added, w.loops_left
+            "reconstruct: watertight: {} odd loop pair(s) joined by splitting {} face(s), {} loop(s) filled with {} quad(s) (the longest {} edges), {} new vertices in all, {} loop(s) left open\n",
+            w.odd_pairs, w.faces_split, w.loops_filled, w.quads_added, w.longest_loop, w.vertices_added, w.loops_left
         ));
     }
     if cfg.second_pass.is_some() && cfg.run_postprocess {

@@ -169,10 +169,9 @@ pub fn run(argv: &[String]) -> Result<()> {
     say!("  components re-oriented (closed: outward; open: as most input faces): {}", rep.components_flipped);
     if let Some(w) = &closed {
         say!(
-            "  watertight: {} odd loop pair(s) joined by splitting {} face(s), {} candidate(s) put in at holes, {} loop(s) filled with {} quad(s) (the longest {} edges), {} new vertices, {} loop(s) left open",
+            "  watertight: {} odd loop pair(s) joined by splitting {} face(s), {} loop(s) filled with {} quad(s) (the longest {} edges), {} new vertices, {} loop(s) left open",
             w.odd_pairs,
             w.faces_split,
-            w.rescued,
             w.loops_filled,
             w.quads_added,
             w.longest_loop,

@@ -1014,6 +1014,22 @@ fn support_table(near: &[bool], lists: &[(&[[u32; 4]], &[f32])]) -> std::collect
 /// Paths of faces (at most `max_faces` long), each from a face across the loop `lp` to a
 /// face where `hits` holds, moving across interior edges, in order of least total `cost`
 /// (Dijkstra; one path per end face, at most 32).
+/// A face on a Dijkstra heap over faces: (path cost, face index, path length). The
+/// heap pops the least cost first, ties by the lower face index (deterministic).
+#[derive(PartialEq)]
+pub(crate) struct Item(pub(crate) f64, pub(crate) u32, pub(crate) usize);
+impl Eq for Item {}
+impl PartialOrd for Item {
+    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for Item {
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        o.0.total_cmp(&self.0).then(o.1.cmp(&self.1))
+    }
+}
+
 fn cheap_face_paths(
     mesh: &HalfedgeMesh,
     lp: &[HalfedgeId],
@@ -1021,21 +1037,7 @@ fn cheap_face_paths(
     max_faces: usize,
     cost: &dyn Fn(FaceId) -> f64,
 ) -> Vec<Vec<FaceId>> {
-    use std::cmp::Ordering;
     use std::collections::{BinaryHeap, HashMap};
-    #[derive(PartialEq)]
-    struct Item(f64, u32, usize);
-    impl Eq for Item {}
-    impl PartialOrd for Item {
-        fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
-            Some(self.cmp(o))
-        }
-    }
-    impl Ord for Item {
-        fn cmp(&self, o: &Self) -> Ordering {
-            o.0.total_cmp(&self.0).then(o.1.cmp(&self.1))
-        }
-    }
     // face -> (best cost, parent, length)
     let mut best: HashMap<u32, (f64, Option<FaceId>, usize)> = HashMap::new();
     let mut heap = BinaryHeap::new();

@@ -32,10 +32,9 @@
 //! Only loops of at most `max_loop_edges` edges are touched (0: every loop). The input's
 //! vertices keep their positions and indices; new vertices are appended.
 
-use std::cmp::Ordering;
 use std::collections::{BinaryHeap, HashMap, HashSet};
 
-use super::close::{add_all, quadrangulate, CloseConfig};
+use super::close::{add_all, quadrangulate, CloseConfig, Item};
 use super::halfedge::{corner_set, HalfedgeMesh};
 use super::handles::{FaceId, HalfedgeId};
 use super::hole_fill::{fill_holes, scaled_jacobian, HoleFillConfig};
@@ -274,20 +273,6 @@ struct Strip {
     exit: Vec<HalfedgeId>,
 }
 
-#[derive(PartialEq)]
-struct Item(f64, u32);
-impl Eq for Item {}
-impl PartialOrd for Item {
-    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
-        Some(self.cmp(o))
-    }
-}
-impl Ord for Item {
-    fn cmp(&self, o: &Self) -> Ordering {
-        o.0.total_cmp(&self.0).then(o.1.cmp(&self.1))
-    }
-}
-
 /// Face-disjoint strips pairing the odd loops of at most `limit` edges, shortest loops
 /// first.
 fn pair_odd_loops(hm: &HalfedgeMesh, limit: usize, support: &dyn Fn([u32; 4]) -> f64) -> Vec<Strip> {
@@ -324,13 +309,13 @@ fn pair_odd_loops(hm: &HalfedgeMesh, limit: usize, support: &dyn Fn([u32; 4]) ->
                 let c = cost(f);
                 if best.get(&f.0).map_or(true, |b| c < b.0) {
                     best.insert(f.0, (c, None, g));
-                    heap.push(Item(c, f.0));
+                    heap.push(Item(c, f.0, 0));
                 }
             }
         }
         let mut done: HashSet<u32> = HashSet::new();
         let mut found: Option<(FaceId, HalfedgeId, usize)> = None;
-        while let Some(Item(c, f)) = heap.pop() {
+        while let Some(Item(c, f, _)) = heap.pop() {
             if !done.insert(f) {
                 continue;
             }
@@ -353,7 +338,7 @@ fn pair_odd_loops(hm: &HalfedgeMesh, limit: usize, support: &dyn Fn([u32; 4]) ->
                     let nc = c + cost(n);
                     if best.get(&n.0).map_or(true, |b| nc < b.0) {
                         best.insert(n.0, (nc, Some(face), g.opposite()));
-                        heap.push(Item(nc, n.0));
+                        heap.push(Item(nc, n.0, 0));
                     }
                 }
             }

@@ -66,6 +66,11 @@ pub struct WatertightConfig {
     /// Steps of Laplacian smoothing of the added vertices at the end; a move is kept only
     /// when the worst scaled Jacobian of the vertex's quads does not drop.
     pub smoothing_steps: usize,
+    /// A loop that neither the quadrangulation nor the greedy filling closed is cut by
+    /// chords into pieces (the shortest chord for the loop steps it spans, keeping both
+    /// pieces even) until each is quadrangulated or short enough for a fan of its own,
+    /// instead of one fan over the whole loop.
+    pub split_long_loops: bool,
 }
 
 impl Default for WatertightConfig {
@@ -76,6 +81,7 @@ impl Default for WatertightConfig {
             max_quadrangulate_edges: 64,
             rescue_min_prob: None,
             smoothing_steps: 10,
+            split_long_loops: true,
         }
     }
 }
@@ -194,9 +200,16 @@ pub fn close_all(
     own_vertices(&mut hm, &pos);
     for lp in open_loops(&hm, limit) {
         let vs: Vec<u32> = lp.iter().map(|&h| hm.from_vertex(h).0).collect();
-        if vs.len() % 2 == 0 && !has_repeat(&vs) {
-            fan(&mut hm, &mut pos, &vs);
+        if vs.len() % 2 == 1 || has_repeat(&vs) {
+            continue;
         }
+        if cfg.split_long_loops {
+            let quads = split_and_fill(&mut hm, &mut pos, &vs, cfg.max_quadrangulate_edges, &shape_only);
+            if add_all(&mut hm, &quads) {
+                continue;
+            }
+        }
+        fan(&mut hm, &mut pos, &vs);
     }
     smooth_added(&hm, &mut pos, mesh.vertices.len(), cfg.smoothing_steps);
     report.loops_filled = loops_before.saturating_sub(open_loops(&hm, limit).len());
@@ -204,6 +217,67 @@ pub fn close_all(
     report.quads_added = hm.n_faces() - faces_before - report.rescued;
     report.vertices_added = pos.len() - mesh.vertices.len();
     Ok((hm.to_quad_mesh(&pos)?, report))
+}
+
+/// Loops up to this many edges that the quadrangulation cannot close get a fan
+/// ([`split_and_fill`]).
+const FAN_EDGES: usize = 16;
+
+/// Quads closing the even loop `vs` (from-vertices of its boundary half-edges, in
+/// order): its quadrangulation over its own vertices where one meets the shape bound
+/// (up to `max_dp` edges); else, above [`FAN_EDGES`] edges, the loop is cut by the chord
+/// (i, j) with j − i odd (both pieces even, at least 4 edges) and no edge of the mesh
+/// already, of least length per loop step on the shorter side, and each piece is closed
+/// the same way; else a fan round a new vertex at its centroid (added to `hm` and `pos`).
+/// The quads share the chords, so together they close the loop.
+fn split_and_fill(
+    hm: &mut HalfedgeMesh,
+    pos: &mut Vec<[f64; 3]>,
+    vs: &[u32],
+    max_dp: usize,
+    shape: &CloseConfig,
+) -> Vec<[u32; 4]> {
+    let n = vs.len();
+    if n == 4 {
+        return vec![[vs[0], vs[1], vs[2], vs[3]]];
+    }
+    if n <= max_dp {
+        let across = vec![None; n];
+        if let Some(q) = quadrangulate(hm, pos, vs, &across, shape) {
+            return q;
+        }
+    }
+    if n > FAN_EDGES {
+        let mut best: Option<(f64, usize, usize)> = None;
+        for i in 0..n {
+            for d in (3..=n - 3).step_by(2) {
+                let j = i + d;
+                if j >= n {
+                    break;
+                }
+                if hm.find_halfedge(super::handles::VertexId(vs[i]), super::handles::VertexId(vs[j])).is_some() {
+                    continue;
+                }
+                let (a, b) = (pos[vs[i] as usize], pos[vs[j] as usize]);
+                let len = crate::math::norm(crate::math::sub(a, b));
+                let score = len / d.min(n - d) as f64;
+                if best.map_or(true, |(s, _, _)| score < s) {
+                    best = Some((score, i, j));
+                }
+            }
+        }
+        if let Some((_, i, j)) = best {
+            let first: Vec<u32> = vs[i..=j].to_vec();
+            let second: Vec<u32> = vs[j..].iter().chain(&vs[..=i]).copied().collect();
+            let mut quads = split_and_fill(hm, pos, &first, max_dp, shape);
+            quads.extend(split_and_fill(hm, pos, &second, max_dp, shape));
+            return quads;
+        }
+    }
+    let centre = scale(vs.iter().fold([0.0; 3], |s, &v| add(s, pos[v as usize])), 1.0 / n as f64);
+    let c = hm.add_vertex();
+    pos.push(centre);
+    (0..n / 2).map(|k| [vs[2 * k], vs[2 * k + 1], vs[(2 * k + 2) % n], c.0]).collect()
 }
 
 /// Guarded Laplacian smoothing of the vertices from `first` on: each moves to the mean

@@ -69,7 +69,8 @@ pub struct WatertightConfig {
     /// A loop that neither the quadrangulation nor the greedy filling closed is cut by
     /// chords into pieces (the shortest chord for the loop steps it spans, keeping both
     /// pieces even) until each is quadrangulated or short enough for a fan of its own,
-    /// instead of one fan over the whole loop.
+    /// instead of one fan over the whole loop. Off by default: built at the end of
+    /// session 32, not yet judged (docs/EXPERIMENTS.md, "Session 32", rule 4).
     pub split_long_loops: bool,
 }
 
@@ -81,7 +82,7 @@ impl Default for WatertightConfig {
             max_quadrangulate_edges: 64,
             rescue_min_prob: None,
             smoothing_steps: 10,
-            split_long_loops: true,
+            split_long_loops: false,
         }
     }
 }
@@ -255,7 +256,10 @@ fn split_and_fill(
                 if j >= n {
                     break;
                 }
-                if hm.find_halfedge(super::handles::VertexId(vs[i]), super::handles::VertexId(vs[j])).is_some() {
+                if hm
+                    .find_halfedge(super::handles::VertexId(vs[i]), super::handles::VertexId(vs[j]))
+                    .is_some()
+                {
                     continue;
                 }
                 let (a, b) = (pos[vs[i] as usize], pos[vs[j] as usize]);

@@ -278,10 +278,7 @@ fn split_and_fill(
             return quads;
         }
     }
-    let centre = scale(vs.iter().fold([0.0; 3], |s, &v| add(s, pos[v as usize])), 1.0 / n as f64);
-    let c = hm.add_vertex();
-    pos.push(centre);
-    (0..n / 2).map(|k| [vs[2 * k], vs[2 * k + 1], vs[(2 * k + 2) % n], c.0]).collect()
+    fan_quads(hm, pos, vs)
 }
 
 /// Guarded Laplacian smoothing of the vertices from `first` on: each moves to the mean
@@ -333,14 +330,19 @@ fn has_repeat(vs: &[u32]) -> bool {
 /// fan of quads around a new vertex at its centroid; no face changes when they do not
 /// all go in.
 fn fan(hm: &mut HalfedgeMesh, pos: &mut Vec<[f64; 3]>, vs: &[u32]) {
+    let quads = fan_quads(hm, pos, vs);
+    // When they do not go in, the vertex stays, isolated (no face uses it).
+    add_all(hm, &quads);
+}
+
+/// The quads `(v₀, v₁, v₂, c), (v₂, v₃, v₄, c), …` of a fan over the even loop `vs`
+/// round a new vertex `c` at its centroid (added to `hm` and `pos`).
+fn fan_quads(hm: &mut HalfedgeMesh, pos: &mut Vec<[f64; 3]>, vs: &[u32]) -> Vec<[u32; 4]> {
     let n = vs.len();
     let centre = scale(vs.iter().fold([0.0; 3], |s, &v| add(s, pos[v as usize])), 1.0 / n as f64);
     let c = hm.add_vertex();
     pos.push(centre);
-    let quads: Vec<[u32; 4]> =
-        (0..n / 2).map(|i| [vs[2 * i], vs[2 * i + 1], vs[(2 * i + 2) % n], c.0]).collect();
-    // When they do not go in, the vertex stays, isolated (no face uses it).
-    add_all(hm, &quads);
+    (0..n / 2).map(|i| [vs[2 * i], vs[2 * i + 1], vs[(2 * i + 2) % n], c.0]).collect()
 }
 
 /// One strip to split: its faces from the first odd loop to the second, with the

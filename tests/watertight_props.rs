@@ -117,6 +117,7 @@ proptest! {
         share in prop::sample::select(vec![0.0, 0.03, 0.1, 0.25]),
         seed in any::<u64>(),
         weighted: bool,
+        split_long_loops: bool,
     ) {
         let (shape, chi) = if sphere { (cube_sphere(n), 2) } else { (torus(2 * n, n + 1, 3.0, 1.0), 0) };
         let (input, kite_keys) = damaged(&shape, kites, share, seed);
@@ -125,7 +126,8 @@ proptest! {
         prop_assert!(odd % 2 == 0);
         let (cands, probs): (Vec<[u32; 4]>, Vec<f32>) =
             if weighted { (kite_keys.clone(), vec![0.9; kite_keys.len()]) } else { (vec![], vec![]) };
-        let (out, r) = close_all(&input, &WatertightConfig::default(), &cands, &probs).unwrap();
+        let cfg = WatertightConfig { split_long_loops, ..WatertightConfig::default() };
+        let (out, r) = close_all(&input, &cfg, &cands, &probs).unwrap();
         check_closed(&input, &out, &r, chi)?;
         prop_assert!(r.odd_pairs >= odd / 2, "{} odd loops, {:?}", odd, r);
         if loops.is_empty() {

@@ -24,9 +24,11 @@
 //! 3. **Even loops are filled**: by a quadrangulation over each loop's own vertices
 //!    ([`quadrangulate`], its shape bound only: fewest new faces, no new vertex), then
 //!    the greedy hole filling with new vertices ([`fill_holes`], partial fills kept),
-//!    then the quadrangulation again on what is left, then a fan around one new vertex at
-//!    the loop's centroid: quads `(v₀, v₁, v₂, c), (v₂, v₃, v₄, c), …`, which closes any
-//!    even loop that does not pass through a vertex twice.
+//!    then the quadrangulation again on what is left; a loop still open is cut by
+//!    chords into pieces of at most 16 edges ([`WatertightConfig::split_long_loops`],
+//!    session 33) and each piece gets a fan around one new vertex at its centroid:
+//!    quads `(v₀, v₁, v₂, c), (v₂, v₃, v₄, c), …`, which closes any even loop that does
+//!    not pass through a vertex twice.
 //! 4. The added vertices are smoothed (guarded Laplacian steps).
 //!
 //! Only loops of at most `max_loop_edges` edges are touched (0: every loop). The input's
@@ -69,8 +71,10 @@ pub struct WatertightConfig {
     /// A loop that neither the quadrangulation nor the greedy filling closed is cut by
     /// chords into pieces (the shortest chord for the loop steps it spans, keeping both
     /// pieces even) until each is quadrangulated or short enough for a fan of its own,
-    /// instead of one fan over the whole loop. Off by default: built at the end of
-    /// session 32, not yet judged (docs/EXPERIMENTS.md, "Session 32", rule 4).
+    /// instead of one fan over the whole loop. On by default: on the held-out `train/`
+    /// meshes it halved the quads with a scaled Jacobian ≤ 0 that the closing leaves
+    /// (443 → 219 over six tables) at the same F1 (docs/EXPERIMENTS.md, "Session 32",
+    /// rule 4, judged in session 33).
     pub split_long_loops: bool,
 }
 
@@ -82,7 +86,7 @@ impl Default for WatertightConfig {
             max_quadrangulate_edges: 64,
             rescue_min_prob: None,
             smoothing_steps: 10,
-            split_long_loops: false,
+            split_long_loops: true,
         }
     }
 }
@@ -501,4 +505,60 @@ fn split_strips(hm: &HalfedgeMesh, pos: &mut Vec<[f64; 3]>, strips: &[Strip]) ->
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::handles::VertexId;
+    use crate::mesh::validate::validate;
+
+    /// The border of a `nu` × `nv` grid sheet (its from-vertices in loop order), with the
+    /// sheet as a half-edge mesh and its positions lifted by `bump` along z.
+    fn sheet(nu: usize, nv: usize, bump: f64) -> (HalfedgeMesh, Vec<[f64; 3]>, Vec<u32>) {
+        let g = crate::mesh::shapes::grid(nu, nv, nu as f64, nv as f64);
+        let hm = HalfedgeMesh::from_quads(g.vertices.len(), &g.quads).unwrap();
+        let pos: Vec<[f64; 3]> =
+            g.vertices.iter().map(|p| [p[0], p[1], p[2] + bump * (p[0] * 0.7 + p[1] * 1.3).sin()]).collect();
+        let loops = hm.boundary_loops();
+        assert_eq!(loops.len(), 1);
+        let vs = loops[0].iter().map(|&h| hm.from_vertex(h).0).collect();
+        (hm, pos, vs)
+    }
+
+    /// `split_and_fill` without the quadrangulation (`max_dp` 0): the sheet's border is
+    /// cut by chords into pieces of at most [`FAN_EDGES`] edges, each fanned; the quads
+    /// close the sheet into a valid sphere (Euler characteristic 2), every added vertex is
+    /// a fan's centre of degree at most `FAN_EDGES / 2`, the pieces' edges add up to the
+    /// border's plus both sides of every chord. One fan over the whole border (what
+    /// `close_all` did without `split_long_loops`) fails the degree bound above 16 edges.
+    #[test]
+    fn long_loops_are_cut_into_short_fans() {
+        let shape = CloseConfig { min_normal_dot: -1.0, ..CloseConfig::default() };
+        for nu in 2..12 {
+            for nv in 2..12 {
+                let (mut hm, mut pos, vs) = sheet(nu, nv, 0.3);
+                let n = vs.len();
+                let first_new = pos.len();
+                let quads = split_and_fill(&mut hm, &mut pos, &vs, 0, &shape);
+                assert!(add_all(&mut hm, &quads), "{nu}x{nv}: the quads do not go in");
+                validate(&hm).unwrap();
+                assert!(hm.boundary_loops().is_empty(), "{nu}x{nv}");
+                let chi = hm.n_vertices() as i64 - hm.n_edges() as i64 + hm.n_faces() as i64;
+                assert_eq!(chi, 2, "{nu}x{nv}");
+                let pieces = pos.len() - first_new;
+                assert!(pieces >= n.div_ceil(FAN_EDGES), "{nu}x{nv}: {pieces} pieces for {n} edges");
+                let mut edges = 0;
+                for c in first_new..pos.len() {
+                    let degree = hm.vertex_outgoing(VertexId(c as u32)).count();
+                    assert!((2..=FAN_EDGES / 2).contains(&degree), "{nu}x{nv}: centre of degree {degree}");
+                    edges += 2 * degree;
+                }
+                // Each piece's loop has twice as many edges as its centre has spokes;
+                // the chords are counted on both sides.
+                assert_eq!(edges, n + 2 * (pieces - 1), "{nu}x{nv}");
+                assert!(pos[first_new..].iter().flatten().all(|x| x.is_finite()));
+            }
+        }
+    }
 }

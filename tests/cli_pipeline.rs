@@ -389,6 +389,88 @@ fn refine_tiny(data: &str, model: &str, out: &str, rounds: &str, extra: &[&str])
     ok(&args)
 }
 
+/// `refine --precise-bn` (session 33): the refined model's classifier has the running
+/// statistics the library computes over the training samples (here every sample: the
+/// tiny data has no validation part), its weights are the base's, and they differ
+/// from the base's statistics; a model with a point encoder is refused by name.
+#[test]
+fn refine_precise_bn_recomputes_the_classifiers_statistics() {
+    use point2quad::pipeline::model::Model;
+    let s = Scratch::new("precise");
+    let model = trained(&s);
+    let data = s.p("data");
+    let refined = s.p("p.p2qm");
+    let out = refine_tiny(&data, &model, &refined, "1", &["--precise-bn"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("batch-norm statistics of the classifier recomputed over 3 training samples"),
+        "{err}"
+    );
+    let got = Model::load(Path::new(&refined)).unwrap();
+    let base = Model::load(Path::new(&model)).unwrap();
+    let mut want = Model::load(Path::new(&model)).unwrap();
+    let fin = base.config().face_in();
+    let mut files: Vec<_> = std::fs::read_dir(&data)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "p2qs"))
+        .collect();
+    files.sort();
+    assert_eq!(files.len(), 3);
+    let rows: Vec<Vec<f32>> = files
+        .iter()
+        .map(|f| {
+            point2quad::pipeline::train::sample_input(
+                &point2quad::pipeline::dataset::load_sample(f).unwrap(),
+                fin,
+            )
+        })
+        .collect();
+    assert_eq!(want.precise_batch_norm(&rows, 12_000).unwrap(), 3);
+    let mut running = 0;
+    let mut moved = false;
+    for id in base.params.ids() {
+        let name = base.params.name(id);
+        if name.starts_with("refine.") {
+            continue;
+        }
+        let g = got.params.get(got.params.find(name).unwrap()).data();
+        if name.contains(".running_") {
+            running += 1;
+            let w = want.params.get(id).data();
+            for (a, b) in g.iter().zip(w) {
+                assert!((a - b).abs() <= 1e-5 * (1.0 + b.abs()), "{name}: {a} against {b}");
+            }
+            moved |= g != base.params.get(id).data();
+        } else {
+            assert_eq!(g, base.params.get(id).data(), "{name}");
+        }
+    }
+    assert!(running >= 2 && moved, "{running} buffers, moved {moved}");
+    // Without the switch the statistics are the base's.
+    let plain = s.p("plain.p2qm");
+    refine_tiny(&data, &model, &plain, "1", &[]);
+    let plain = Model::load(Path::new(&plain)).unwrap();
+    for id in base.params.ids().filter(|&id| base.params.name(id).contains(".running_")) {
+        let name = base.params.name(id);
+        assert_eq!(
+            plain.params.get(plain.params.find(name).unwrap()).data(),
+            base.params.get(id).data(),
+            "{name}"
+        );
+    }
+    let kp = s.p("kp.p2qm");
+    let m = Model::new(point2quad::pipeline::model::ModelConfig::default_kp(), 0).unwrap();
+    point2quad::nn::checkpoint::save(Path::new(&kp), &m.to_checkpoint(None)).unwrap();
+    let never = s.p("never.p2qm");
+    let err = fails(&["refine", "--data", &data, "--model", &kp, "--out", &never, "--precise-bn"], 1);
+    assert!(
+        err.contains("--precise-bn") && err.contains("kp.p2qm") && err.contains("point encoder"),
+        "{err}"
+    );
+    assert!(!Path::new(&never).exists());
+}
+
 /// `refine` end to end on the tiny data: the rounds train, the weights file is
 /// written, `reconstruct --model` reads it and gives a valid mesh; bad options and
 /// inputs are usage or data errors that write nothing.

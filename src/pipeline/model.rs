@@ -24,7 +24,7 @@ use crate::nn::module::{Module, ResidualBlock};
 use crate::pipeline::refine::{RefineInput, Refiner, SideRule};
 use crate::rng::Rng;
 use crate::spatial::neighborhoods::NeighborCap;
-use crate::tensor::{Act, Graph, ParamStore, Tensor, Var};
+use crate::tensor::{Act, Graph, ParamId, ParamStore, Tensor, Var};
 use crate::{Error, Result};
 use std::path::Path;
 use std::sync::Arc;
@@ -683,6 +683,98 @@ impl Model {
             out.extend(probabilities(g.value(logits).data()));
         }
         Ok(out)
+    }
+
+    /// Replaces the classifier's batch-norm running statistics by the mean, over
+    /// `batches`, of each block's batch statistics ("precise" batch norm; session 33).
+    /// Each batch is one cloud's F_info rows (cloud frame, as a dataset sample stores
+    /// them), read as one batch as a training step reads a cloud: an even spread of at
+    /// most `max_rows` of them (row ⌊i·m/N⌋ for i < N). Every cloud counts once, the
+    /// variance unbiased (m/(m − 1)) as the running one. Batches of fewer than 2 rows
+    /// are skipped. In batch-statistics mode no block reads the running buffers, so the
+    /// result does not depend on them and equals the mean of what each batch alone
+    /// gives. Returns the number of batches used.
+    ///
+    /// # Errors
+    /// `Error::InvalidInput` for a model with a point encoder (its blocks need the
+    /// clouds' points) or one whose batch norm reads each cloud's own statistics
+    /// ([`ModelConfig::cloud_batch_stats`]: the running ones are never read), for no
+    /// usable batch or `max_rows` < 2, and non-finite statistics; `Error::Shape` for a
+    /// batch that is not whole rows of the input width.
+    pub fn precise_batch_norm<B: AsRef<[f32]>>(
+        &mut self,
+        batches: impl IntoIterator<Item = B>,
+        max_rows: usize,
+    ) -> Result<usize> {
+        if self.net.config.point_dim > 0 {
+            return Err(Error::invalid(
+                "precise batch-norm statistics: models with a point encoder are not supported",
+            ));
+        }
+        if self.net.config.cloud_batch_stats {
+            return Err(Error::invalid(
+                "precise batch-norm statistics: this model's batch norm reads each cloud's own statistics",
+            ));
+        }
+        if max_rows < 2 {
+            return Err(Error::invalid(format!("precise batch-norm statistics: max_rows {max_rows} < 2")));
+        }
+        let fin = self.net.config.face_in();
+        // Per block (in execution order): the buffers and the sums of means and variances.
+        let mut sums: Vec<(ParamId, ParamId, Vec<f64>, Vec<f64>)> = Vec::new();
+        let mut used = 0usize;
+        for rows in batches {
+            let rows = rows.as_ref();
+            let m = self.rows(rows)?;
+            if m < 2 {
+                continue;
+            }
+            let n = m.min(max_rows);
+            let picked: Vec<f32> = (0..n)
+                .flat_map(|i| {
+                    let r = (i as u64 * m as u64 / n as u64) as usize;
+                    rows[r * fin..(r + 1) * fin].iter().copied()
+                })
+                .collect();
+            let mut g = Graph::eval_shared(&self.params).with_batch_stats(true).capturing_stats();
+            self.logits(&mut g, picked, None)?;
+            let stats = g.captured_stats();
+            if used == 0 {
+                sums = stats
+                    .iter()
+                    .map(|st| {
+                        (st.running_mean, st.running_var, vec![0.0; st.mean.len()], vec![0.0; st.var.len()])
+                    })
+                    .collect();
+            }
+            if stats.len() != sums.len() {
+                return Err(Error::invalid("precise batch-norm statistics: blocks differ between batches"));
+            }
+            let unbias = n as f64 / (n as f64 - 1.0);
+            for (st, (_, _, ms, vs)) in stats.iter().zip(sums.iter_mut()) {
+                for (a, &b) in ms.iter_mut().zip(&st.mean) {
+                    *a += b as f64;
+                }
+                for (a, &b) in vs.iter_mut().zip(&st.var) {
+                    *a += b as f64 * unbias;
+                }
+            }
+            used += 1;
+        }
+        if used == 0 {
+            return Err(Error::invalid("precise batch-norm statistics: no batch of 2 or more rows"));
+        }
+        let mean = |v: &[f64]| v.iter().map(|&x| (x / used as f64) as f32).collect::<Vec<f32>>();
+        let new: Vec<(ParamId, Vec<f32>, ParamId, Vec<f32>)> =
+            sums.iter().map(|(rm, rv, ms, vs)| (*rm, mean(ms), *rv, mean(vs))).collect();
+        if new.iter().any(|(_, m, _, v)| m.iter().chain(v).any(|x| !x.is_finite())) {
+            return Err(Error::invalid("precise batch-norm statistics: non-finite statistics"));
+        }
+        for (rm, m, rv, v) in new {
+            self.params.get_mut(rm).data_mut().copy_from_slice(&m);
+            self.params.get_mut(rv).data_mut().copy_from_slice(&v);
+        }
+        Ok(used)
     }
 
     /// The logits of `rows` (cloud-frame F_info rows, framed here) in `g`; with
@@ -1749,5 +1841,127 @@ mod tests {
                 assert!(slow.iter().any(|&p| p > 0.01 && p < 0.99));
             }
         }
+    }
+
+    /// Random F_info-like rows: `m` rows of `fin` values in [−1, 1].
+    fn random_rows(rng: &mut Rng, m: usize, fin: usize) -> Vec<f32> {
+        (0..m * fin).map(|_| rng.uniform(-1.0, 1.0) as f32).collect()
+    }
+
+    fn buffers(m: &Model) -> Vec<Vec<f32>> {
+        let names: Vec<ParamId> =
+            m.params.ids().filter(|&id| m.params.name(id).contains(".running_")).collect();
+        names.iter().map(|&id| m.params.get(id).data().to_vec()).collect()
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig { cases: 24, ..Default::default() })]
+
+        /// Precise statistics against references: the first block's running mean and
+        /// (unbiased) variance equal a brute-force pass over the framed rows times its
+        /// weights; over several batches every buffer is the mean of what each batch
+        /// alone gives; a cap on the rows equals passing the even spread of rows itself;
+        /// the running buffers the model had do not matter.
+        #[test]
+        fn precise_batch_norm_matches_references(
+            seed in 0u64..1000,
+            sizes in proptest::collection::vec(0usize..60, 1..5),
+            cap in 2usize..80,
+        ) {
+            let mut rng = Rng::new(seed);
+            let base = Model::new(ModelConfig::default_preset(), seed).unwrap();
+            let fin = base.config().face_in();
+            let batches: Vec<Vec<f32>> = sizes.iter().map(|&m| random_rows(&mut rng, m, fin)).collect();
+            let usable: Vec<&Vec<f32>> = batches.iter().filter(|b| b.len() / fin >= 2).collect();
+            let mut all = Model::new(ModelConfig::default_preset(), seed).unwrap();
+            // Other running buffers to start from: they must not matter.
+            for id in all.params.ids().collect::<Vec<_>>() {
+                if all.params.name(id).contains(".running_") {
+                    for x in all.params.get_mut(id).data_mut() {
+                        *x = rng.uniform(0.5, 2.0) as f32;
+                    }
+                }
+            }
+            let r = all.precise_batch_norm(batches.iter().map(|b| b.as_slice()), usize::MAX);
+            if usable.is_empty() {
+                proptest::prop_assert!(r.is_err());
+                return Ok(());
+            }
+            proptest::prop_assert_eq!(r.unwrap(), usable.len());
+            // The mean of the single-batch results, buffer by buffer.
+            let singles: Vec<Vec<Vec<f32>>> = usable
+                .iter()
+                .map(|b| {
+                    let mut m = Model::new(ModelConfig::default_preset(), seed).unwrap();
+                    m.precise_batch_norm([b.as_slice()], usize::MAX).unwrap();
+                    buffers(&m)
+                })
+                .collect();
+            for (k, got) in buffers(&all).iter().enumerate() {
+                for (j, &g) in got.iter().enumerate() {
+                    let want = singles.iter().map(|s| s[k][j] as f64).sum::<f64>() / singles.len() as f64;
+                    proptest::prop_assert!((g as f64 - want).abs() <= 1e-5 * (1.0 + want.abs()), "buffer {k}[{j}]: {g} against {want}");
+                }
+            }
+            // Brute force for the first block of the first usable batch.
+            let b = usable[0];
+            let m = b.len() / fin;
+            let x = base.framed(b.to_vec());
+            let block = &base.net.face[0];
+            let w = base.params.get(block.weight).data();
+            let (mut mean, mut var) = (vec![0.0f64; block.cout], vec![0.0f64; block.cout]);
+            let y: Vec<Vec<f64>> = (0..m)
+                .map(|i| (0..block.cout).map(|c| (0..fin).map(|k| x[i * fin + k] as f64 * w[c * fin + k] as f64).sum()).collect())
+                .collect();
+            for c in 0..block.cout {
+                mean[c] = y.iter().map(|r| r[c]).sum::<f64>() / m as f64;
+                var[c] = y.iter().map(|r| (r[c] - mean[c]).powi(2)).sum::<f64>() / (m as f64 - 1.0);
+            }
+            let mut one = Model::new(ModelConfig::default_preset(), seed).unwrap();
+            one.precise_batch_norm([b.as_slice()], usize::MAX).unwrap();
+            let rm = one.params.get(block.bn.running_mean).data();
+            let rv = one.params.get(block.bn.running_var).data();
+            for c in 0..block.cout {
+                proptest::prop_assert!((rm[c] as f64 - mean[c]).abs() <= 1e-4 * (1.0 + mean[c].abs()), "mean {c}: {} against {}", rm[c], mean[c]);
+                proptest::prop_assert!((rv[c] as f64 - var[c]).abs() <= 1e-4 * (1.0 + var[c]), "var {c}: {} against {}", rv[c], var[c]);
+            }
+            // A cap on the rows: the same as passing the even spread itself.
+            let mut capped = Model::new(ModelConfig::default_preset(), seed).unwrap();
+            capped.precise_batch_norm([b.as_slice()], cap).unwrap();
+            let n = m.min(cap);
+            let spread: Vec<f32> =
+                (0..n).flat_map(|i| b[(i * m / n) * fin..(i * m / n + 1) * fin].iter().copied()).collect();
+            let mut direct = Model::new(ModelConfig::default_preset(), seed).unwrap();
+            direct.precise_batch_norm([spread.as_slice()], usize::MAX).unwrap();
+            proptest::prop_assert_eq!(buffers(&capped), buffers(&direct));
+        }
+    }
+
+    /// What it refuses: a point encoder, statistics read per cloud, a cap under 2,
+    /// nothing usable, ragged rows; a refused call leaves the buffers alone.
+    #[test]
+    fn precise_batch_norm_refuses_what_it_cannot_do() {
+        let mut kp = Model::new(ModelConfig::default_kp(), 1).unwrap();
+        let fin = kp.config().face_in();
+        let rows = vec![0.5f32; 4 * fin];
+        assert!(kp
+            .precise_batch_norm([rows.as_slice()], 100)
+            .unwrap_err()
+            .to_string()
+            .contains("point encoder"));
+        let mut m = Model::new(ModelConfig::default_preset(), 1).unwrap();
+        let fin = m.config().face_in();
+        let before = buffers(&m);
+        let rows = vec![0.5f32; 4 * fin];
+        assert!(m.precise_batch_norm([rows.as_slice()], 1).is_err());
+        assert!(m.precise_batch_norm([&rows[..fin]], 100).unwrap_err().to_string().contains("no batch"));
+        assert!(m.precise_batch_norm([&rows[..fin + 1]], 100).is_err());
+        assert_eq!(buffers(&m), before);
+        m.net.config.cloud_batch_stats = true;
+        assert!(m
+            .precise_batch_norm([rows.as_slice()], 100)
+            .unwrap_err()
+            .to_string()
+            .contains("own statistics"));
     }
 }

@@ -10,7 +10,7 @@ use point2quad::pipeline::model::{Model, MAX_REFINE_ROUNDS};
 use point2quad::pipeline::refine::{
     train_refiner, RefineInput, RefineProgress, RefineSample, RefineTrainConfig, SideRule,
 };
-use point2quad::pipeline::train::{check_samples, sample_input};
+use point2quad::pipeline::train::{check_samples, sample_input, TrainConfig};
 use point2quad::{Error, Result};
 use std::path::{Path, PathBuf};
 
@@ -70,6 +70,15 @@ OPTIONS:
                           points it was not trained on (the shipped rounds, since
                           session 22). Validation reads first draws either way.
                           (`train --draws` defaults to all, this one to first) [first]
+    --precise-bn          first replace the classifier's batch-norm running statistics
+                          (momentum averages over its last training steps, mostly the
+                          last 20 or so clouds) by the mean over the training samples
+                          read here of each block's batch statistics, each cloud's
+                          candidates one batch (an even spread of at most 12,000, as
+                          a training step draws); then score and train the rounds.
+                          MODEL keeps those statistics. Not for models with a point
+                          encoder or ones reading each cloud's own statistics
+                          (session 33)
 ";
 
 const SPEC: Spec = Spec {
@@ -90,7 +99,7 @@ const SPEC: Spec = Spec {
         "--draws",
         "--fold-models",
     ],
-    switches: &[],
+    switches: &["--precise-bn"],
 };
 
 fn parse_widths(v: &str) -> Result<Vec<usize>> {
@@ -153,7 +162,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     for m in a.value("--fold-models").into_iter().flat_map(|v| v.split(',')) {
         crate::output::check_not_input(cmd, &out, Path::new(m.trim()))?;
     }
-    let base = Model::load(&base_path)?;
+    let mut base = Model::load(&base_path)?;
     let fold_models: Vec<Model> = match a.value("--fold-models") {
         None => Vec::new(),
         Some(v) => {
@@ -178,8 +187,6 @@ pub fn run(argv: &[String]) -> Result<()> {
             ms
         }
     };
-    let mut model = base.with_refinement_reading(rounds, &widths, sides, input, cfg.seed)?;
-
     let t0 = std::time::Instant::now();
     let (samples, names) = load_dir(cmd, &data, |s| {
         noise_variant(&s.name).1 == 1 || (all_draws && !split.is_validation(&s.name))
@@ -199,6 +206,19 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     split.check_names(cmd, samples.iter().map(|s| s.name.as_str()))?;
     let fin = base.config().face_in();
+    if a.switch("--precise-bn") {
+        let t = std::time::Instant::now();
+        // One sample's rows at a time.
+        let rows = samples.iter().filter(|s| !split.is_validation(&s.name)).map(|s| sample_input(s, fin));
+        let used = base
+            .precise_batch_norm(rows, TrainConfig::default().max_candidates)
+            .map_err(|e| Error::invalid(format!("refine --precise-bn: {}: {e}", base_path.display())))?;
+        say!(
+            "refine: batch-norm statistics of the classifier recomputed over {used} training samples in {:.1}s",
+            t.elapsed().as_secs_f64()
+        );
+    }
+    let mut model = base.with_refinement_reading(rounds, &widths, sides, input, cfg.seed)?;
     let n_samples = samples.len();
     let (mut tr, mut va) = (Vec::new(), Vec::new());
     for (i, s) in samples.into_iter().enumerate() {

@@ -68,6 +68,11 @@ pub struct WatertightConfig {
     /// Steps of Laplacian smoothing of the added vertices at the end; a move is kept only
     /// when the worst scaled Jacobian of the vertex's quads does not drop.
     pub smoothing_steps: usize,
+    /// Sweeps of a pattern search after the smoothing: each added vertex steps along
+    /// two tangent directions and the normal of its quads (from a quarter of its mean
+    /// edge length, halved when no step helps, [`MAXIMIN_HALVINGS`] times), a step kept
+    /// only when the worst scaled Jacobian of its quads rises. 0 turns it off.
+    pub maximin_sweeps: usize,
     /// A loop that neither the quadrangulation nor the greedy filling closed is cut by
     /// chords into pieces (the shortest chord for the loop steps it spans, keeping both
     /// pieces even) until each is quadrangulated or short enough for a fan of its own,
@@ -86,6 +91,7 @@ impl Default for WatertightConfig {
             max_quadrangulate_edges: 64,
             rescue_min_prob: None,
             smoothing_steps: 10,
+            maximin_sweeps: 3,
             split_long_loops: true,
         }
     }
@@ -217,6 +223,7 @@ pub fn close_all(
         fan(&mut hm, &mut pos, &vs);
     }
     smooth_added(&hm, &mut pos, mesh.vertices.len(), cfg.smoothing_steps);
+    maximin_added(&hm, &mut pos, mesh.vertices.len(), cfg.maximin_sweeps);
     report.loops_filled = loops_before.saturating_sub(open_loops(&hm, limit).len());
     report.loops_left = hm.boundary_loops().len();
     report.quads_added = hm.n_faces() - faces_before - report.rescued;
@@ -285,22 +292,80 @@ fn split_and_fill(
     fan_quads(hm, pos, vs)
 }
 
+/// The worst scaled Jacobian of `faces` (−∞ for a degenerate one).
+fn worst(pos: &[[f64; 3]], faces: &[[usize; 4]]) -> f64 {
+    faces
+        .iter()
+        .map(|q| {
+            let p = q.map(|v| pos[v]);
+            if is_degenerate_quad(&p) {
+                f64::NEG_INFINITY
+            } else {
+                scaled_jacobian(&p)
+            }
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Halvings of the pattern search's step ([`WatertightConfig::maximin_sweeps`]).
+pub const MAXIMIN_HALVINGS: usize = 6;
+
+/// The pattern search of [`WatertightConfig::maximin_sweeps`] over the vertices from
+/// `first` on.
+fn maximin_added(hm: &HalfedgeMesh, pos: &mut [[f64; 3]], first: usize, sweeps: usize) {
+    use crate::math::{cross, norm, normalize, sub};
+    for _ in 0..sweeps {
+        for v in first..pos.len() {
+            let vid = super::handles::VertexId(v as u32);
+            let faces: Vec<[usize; 4]> =
+                hm.vertex_faces(vid).map(|f| hm.face_vertices(f).map(|x| x.idx())).collect();
+            let nbrs: Vec<usize> = hm.vertex_outgoing(vid).map(|h| hm.to_vertex(h).idx()).collect();
+            if faces.is_empty() || nbrs.is_empty() {
+                continue;
+            }
+            // The quads' mean normal (diagonal cross products) and two tangents.
+            let n = faces.iter().fold([0.0; 3], |acc, q| {
+                add(acc, cross(sub(pos[q[2]], pos[q[0]]), sub(pos[q[3]], pos[q[1]])))
+            });
+            let Some(n) = normalize(n) else { continue };
+            let helper = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+            let Some(t1) = normalize(cross(n, helper)) else { continue };
+            let t2 = cross(n, t1);
+            let dirs = [t1, scale(t1, -1.0), t2, scale(t2, -1.0), n, scale(n, -1.0)];
+            let mut h = 0.25 * nbrs.iter().map(|&u| norm(sub(pos[u], pos[v]))).sum::<f64>() / nbrs.len() as f64;
+            let mut best = worst(pos, &faces);
+            for _ in 0..MAXIMIN_HALVINGS {
+                // At most a few steps at one size, then a smaller one.
+                for _ in 0..4 {
+                    let old = pos[v];
+                    let mut pick: Option<([f64; 3], f64)> = None;
+                    for d in dirs {
+                        pos[v] = add(old, scale(d, h));
+                        let w = worst(pos, &faces);
+                        if w > pick.map_or(best, |(_, b)| b) {
+                            pick = Some((pos[v], w));
+                        }
+                    }
+                    match pick {
+                        Some((p, w)) => {
+                            pos[v] = p;
+                            best = w;
+                        }
+                        None => {
+                            pos[v] = old;
+                            break;
+                        }
+                    }
+                }
+                h *= 0.5;
+            }
+        }
+    }
+}
+
 /// Guarded Laplacian smoothing of the vertices from `first` on: each moves to the mean
 /// of its neighbours when that does not lower the worst scaled Jacobian of its quads.
 fn smooth_added(hm: &HalfedgeMesh, pos: &mut [[f64; 3]], first: usize, steps: usize) {
-    let worst = |pos: &[[f64; 3]], faces: &[[usize; 4]]| {
-        faces
-            .iter()
-            .map(|q| {
-                let p = q.map(|v| pos[v]);
-                if is_degenerate_quad(&p) {
-                    f64::NEG_INFINITY
-                } else {
-                    scaled_jacobian(&p)
-                }
-            })
-            .fold(f64::INFINITY, f64::min)
-    };
     for _ in 0..steps {
         for v in first..pos.len() {
             let vid = super::handles::VertexId(v as u32);

@@ -392,7 +392,8 @@ fn refine_tiny(data: &str, model: &str, out: &str, rounds: &str, extra: &[&str])
 /// `refine --precise-bn` (session 33): the refined model's classifier has the running
 /// statistics the library computes over the training samples (here every sample: the
 /// tiny data has no validation part), its weights are the base's, and they differ
-/// from the base's statistics; a model with a point encoder is refused by name.
+/// from the base's statistics; a model with a point encoder is refused by name, and
+/// the switch beside `--fold-models` as a usage error.
 #[test]
 fn refine_precise_bn_recomputes_the_classifiers_statistics() {
     use point2quad::pipeline::model::Model;
@@ -468,6 +469,25 @@ fn refine_precise_bn_recomputes_the_classifiers_statistics() {
         err.contains("--precise-bn") && err.contains("kp.p2qm") && err.contains("point encoder"),
         "{err}"
     );
+    assert!(!Path::new(&never).exists());
+    // With out-of-fold scorers BASE's statistics would not be what scores the rounds' data.
+    let folds = format!("{model},{model}");
+    let err = fails(
+        &[
+            "refine",
+            "--data",
+            &data,
+            "--model",
+            &model,
+            "--out",
+            &never,
+            "--precise-bn",
+            "--fold-models",
+            &folds,
+        ],
+        2,
+    );
+    assert!(err.contains("--precise-bn") && err.contains("--fold-models"), "{err}");
     assert!(!Path::new(&never).exists());
 }
 

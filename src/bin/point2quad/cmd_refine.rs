@@ -77,8 +77,8 @@ OPTIONS:
                           candidates one batch (an even spread of at most 12,000, as
                           a training step draws); then score and train the rounds.
                           MODEL keeps those statistics. Not for models with a point
-                          encoder or ones reading each cloud's own statistics
-                          (session 33)
+                          encoder or ones reading each cloud's own statistics, nor
+                          with --fold-models (session 33)
 ";
 
 const SPEC: Spec = Spec {
@@ -187,6 +187,15 @@ pub fn run(argv: &[String]) -> Result<()> {
             ms
         }
     };
+    let precise = a.switch("--precise-bn");
+    if precise && !fold_models.is_empty() {
+        return Err(Error::Usage(
+            "refine: --precise-bn recomputes BASE's statistics, but with --fold-models the training samples are scored by the fold models".into(),
+        ));
+    }
+    // Checked before the data is read (a bad combination fails at once); built again
+    // below, once --precise-bn has set the classifier's statistics.
+    base.with_refinement_reading(rounds, &widths, sides, input, cfg.seed)?;
     let t0 = std::time::Instant::now();
     let (samples, names) = load_dir(cmd, &data, |s| {
         noise_variant(&s.name).1 == 1 || (all_draws && !split.is_validation(&s.name))
@@ -206,7 +215,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     split.check_names(cmd, samples.iter().map(|s| s.name.as_str()))?;
     let fin = base.config().face_in();
-    if a.switch("--precise-bn") {
+    if precise {
         let t = std::time::Instant::now();
         // One sample's rows at a time.
         let rows = samples.iter().filter(|s| !split.is_validation(&s.name)).map(|s| sample_input(s, fin));

@@ -1011,9 +1011,6 @@ fn support_table(near: &[bool], lists: &[(&[[u32; 4]], &[f32])]) -> std::collect
     table
 }
 
-/// Paths of faces (at most `max_faces` long), each from a face across the loop `lp` to a
-/// face where `hits` holds, moving across interior edges, in order of least total `cost`
-/// (Dijkstra; one path per end face, at most 32).
 /// A face on a Dijkstra heap over faces: (path cost, face index, path length). The
 /// heap pops the least cost first, ties by the lower face index (deterministic).
 #[derive(PartialEq)]
@@ -1030,6 +1027,9 @@ impl Ord for Item {
     }
 }
 
+/// Paths of faces (at most `max_faces` long), each from a face across the loop `lp` to a
+/// face where `hits` holds, moving across interior edges, in order of least total `cost`
+/// (Dijkstra; one path per end face, at most 32).
 fn cheap_face_paths(
     mesh: &HalfedgeMesh,
     lp: &[HalfedgeId],

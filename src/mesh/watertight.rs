@@ -40,13 +40,13 @@ use std::collections::{BinaryHeap, HashMap, HashSet};
 
 use super::close::{add_all, quadrangulate, CloseConfig, Item};
 use super::halfedge::{corner_set, HalfedgeMesh};
-use super::handles::{FaceId, HalfedgeId};
+use super::handles::{FaceId, HalfedgeId, VertexId};
 use super::hole_fill::{fill_holes, scaled_jacobian, HoleFillConfig};
 use super::poly::QuadMesh;
 use super::quality::is_degenerate_quad;
 use super::rescue::{rescue_faces, RescueConfig};
 use crate::error::{Error, Result};
-use crate::math::{add, scale};
+use crate::math::{add, cross, norm, normalize, scale, sub};
 
 /// Settings of [`close_all`].
 #[derive(Clone, Debug, PartialEq)]
@@ -273,14 +273,11 @@ fn split_and_fill(
                 if j >= n {
                     break;
                 }
-                if hm
-                    .find_halfedge(super::handles::VertexId(vs[i]), super::handles::VertexId(vs[j]))
-                    .is_some()
-                {
+                if hm.find_halfedge(VertexId(vs[i]), VertexId(vs[j])).is_some() {
                     continue;
                 }
                 let (a, b) = (pos[vs[i] as usize], pos[vs[j] as usize]);
-                let len = crate::math::norm(crate::math::sub(a, b));
+                let len = norm(sub(a, b));
                 let score = len / d.min(n - d) as f64;
                 if best.map_or(true, |(s, _, _)| score < s) {
                     best = Some((score, i, j));
@@ -319,10 +316,9 @@ pub const MAXIMIN_HALVINGS: usize = 6;
 /// The pattern search of [`WatertightConfig::maximin_sweeps`] over the vertices from
 /// `first` on.
 fn maximin_added(hm: &HalfedgeMesh, pos: &mut [[f64; 3]], first: usize, sweeps: usize) {
-    use crate::math::{cross, norm, normalize, sub};
     for _ in 0..sweeps {
         for v in first..pos.len() {
-            let vid = super::handles::VertexId(v as u32);
+            let vid = VertexId(v as u32);
             let faces: Vec<[usize; 4]> =
                 hm.vertex_faces(vid).map(|f| hm.face_vertices(f).map(|x| x.idx())).collect();
             let nbrs: Vec<usize> = hm.vertex_outgoing(vid).map(|h| hm.to_vertex(h).idx()).collect();
@@ -375,7 +371,7 @@ fn maximin_added(hm: &HalfedgeMesh, pos: &mut [[f64; 3]], first: usize, sweeps: 
 fn smooth_added(hm: &HalfedgeMesh, pos: &mut [[f64; 3]], first: usize, steps: usize) {
     for _ in 0..steps {
         for v in first..pos.len() {
-            let vid = super::handles::VertexId(v as u32);
+            let vid = VertexId(v as u32);
             let nbrs: Vec<usize> = hm.vertex_outgoing(vid).map(|h| hm.to_vertex(h).idx()).collect();
             if nbrs.is_empty() {
                 continue;
@@ -582,7 +578,6 @@ fn split_strips(hm: &HalfedgeMesh, pos: &mut Vec<[f64; 3]>, strips: &[Strip]) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::handles::VertexId;
     use crate::mesh::validate::validate;
 
     /// The border of a `nu` × `nv` grid sheet (its from-vertices in loop order), with the

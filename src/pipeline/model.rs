@@ -655,9 +655,7 @@ impl Model {
         let one_batch = cloud && m <= stats_rows;
         let sampled;
         let params = if cloud && !one_batch {
-            // In u64: i · m passes u32 on 32-bit targets (wasm32) for large clouds.
-            let pick: Vec<usize> =
-                (0..stats_rows).map(|i| (i as u64 * m as u64 / stats_rows as u64) as usize).collect();
+            let pick: Vec<usize> = even_spread(m, stats_rows).collect();
             let rows: Vec<f32> =
                 pick.iter().flat_map(|&i| face_features[i * fin..(i + 1) * fin].iter().copied()).collect();
             let corners: Option<Vec<[u32; 4]>> = points.map(|(_, c)| pick.iter().map(|&i| c[i]).collect());
@@ -730,12 +728,8 @@ impl Model {
                 continue;
             }
             let n = m.min(max_rows);
-            let picked: Vec<f32> = (0..n)
-                .flat_map(|i| {
-                    let r = (i as u64 * m as u64 / n as u64) as usize;
-                    rows[r * fin..(r + 1) * fin].iter().copied()
-                })
-                .collect();
+            let picked: Vec<f32> =
+                even_spread(m, n).flat_map(|r| rows[r * fin..(r + 1) * fin].iter().copied()).collect();
             let mut g = Graph::eval_shared(&self.params).with_batch_stats(true).capturing_stats();
             self.logits(&mut g, picked, None)?;
             let stats = g.captured_stats();
@@ -1045,6 +1039,12 @@ impl Model {
 /// Rows the classifier scores at a time in inference ([`Model::classify`]): a multiple
 /// of the GEMM's row block, so chunking changes no bit of the result.
 const CLASSIFY_CHUNK_ROWS: usize = 64 * crate::tensor::gemm::ROW_BLOCK;
+
+/// `n` row indices spread evenly over `m` rows: ⌊i·m/n⌋ for i < n (in u64: i · m passes
+/// u32 on 32-bit targets, wasm32, for large clouds).
+fn even_spread(m: usize, n: usize) -> impl Iterator<Item = usize> {
+    (0..n).map(move |i| (i as u64 * m as u64 / n as u64) as usize)
+}
 
 /// Candidates up to which a [`ModelConfig::cloud_batch_stats`] model scores a cloud in
 /// one batch; beyond, its statistics come from this many of them ([`Model::score_rows`]).

@@ -55,6 +55,31 @@ pub struct ReconstructConfig {
     /// (the default) leaves the loops the classifier's faces do not close. Part of the
     /// post-process: ignored when `run_postprocess` is false.
     pub watertight: Option<WatertightConfig>,
+    /// Each model runs at most this many of its refinement rounds (`None`: all of
+    /// them); the result is what the model refined with that many rounds gives
+    /// ([`crate::pipeline::refine::Refiner::apply_first`]).
+    pub max_rounds: Option<usize>,
+    /// Clouds of fewer points than this run at most [`ReconstructConfig::small_cloud_rounds`]
+    /// refinement rounds (session 34; 0, the default, never applies). The rounds
+    /// learn from the training clouds, the smallest of which has 238 points: a
+    /// late round may then read a tiny cloud, most of whose faces are on its border,
+    /// as it never saw one. Counted over the cloud each pass scores (distinct points,
+    /// without the far outliers; the second pass without the points it left out).
+    pub small_cloud_points: usize,
+    /// See [`ReconstructConfig::small_cloud_points`].
+    pub small_cloud_rounds: usize,
+}
+
+impl ReconstructConfig {
+    /// How many refinement rounds a cloud of `points` points runs at most under this
+    /// configuration (`None`: all the model has).
+    pub fn rounds_for(&self, points: usize) -> Option<usize> {
+        let small = (points < self.small_cloud_points).then_some(self.small_cloud_rounds);
+        match (self.max_rounds, small) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
 }
 
 /// The second pass of [`reconstruct`] (session 26): after the first pass's
@@ -108,6 +133,9 @@ impl Default for ReconstructConfig {
                 cover: SecondPassCover::Believed,
             }),
             watertight: None,
+            max_rounds: None,
+            small_cloud_points: 0,
+            small_cloud_rounds: usize::MAX,
         }
     }
 }
@@ -379,7 +407,8 @@ fn score_cloud(
         // rivals and neighbours: the same as `predict_with_points`, timed apart.
         let p = match model.refiner() {
             Some(r) => {
-                let p = r.apply(&model.params, local, &cands.quads, &base)?;
+                let n = cfg.rounds_for(local.len()).unwrap_or(usize::MAX);
+                let p = r.apply_first(&model.params, local, &cands.quads, &base, n)?;
                 *t_refine.get_or_insert(0.0) += clock.split();
                 check_probabilities(k, &p)?;
                 p

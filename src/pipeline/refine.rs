@@ -904,9 +904,30 @@ impl Refiner {
         quads: &[[u32; 4]],
         base: &[f32],
     ) -> Result<Vec<f32>> {
+        self.apply_first(params, points, quads, base, self.rounds.len())
+    }
+
+    /// As [`Refiner::apply`], running only the first `n` rounds (all of them when `n`
+    /// is at least their number; `base` itself for 0): what a model refined with `n`
+    /// rounds gives, since a round is trained without reading the rounds after it.
+    ///
+    /// # Errors
+    /// As [`refine_features`].
+    pub fn apply_first(
+        &self,
+        params: &ParamStore,
+        points: &[[f32; 3]],
+        quads: &[[u32; 4]],
+        base: &[f32],
+        n: usize,
+    ) -> Result<Vec<f32>> {
+        let n = n.min(self.rounds.len());
+        if n == 0 {
+            return Ok(base.to_vec());
+        }
         let graph = CandidateGraph::with_input(quads, points, self.sides, self.input)?;
         let mut p = base.to_vec();
-        for r in 0..self.rounds.len() {
+        for r in 0..n {
             let f = graph.features(&p, base)?;
             p = self.round_probs(params, r, &f, false)?;
         }

@@ -48,6 +48,12 @@ OPTIONS:
                           candidate and their probabilities are averaged
                           [the shipped weights]
     --svg PREVIEW.svg     also write a shaded SVG picture of the result
+    --rounds N            run at most the first N of the model's refinement rounds,
+                          0 to 8: the probabilities the model refined with N rounds
+                          gives (default: all; the shipped weights have 5)
+    --small-cloud-rounds P,N
+                          clouds of fewer than P distinct points run at most N
+                          refinement rounds (session 34; default: no such limit)
     --progress            name each stage on stderr as it ends, with its time
                           (default: for clouds of 50,000 points or more)
     --no-postprocess      write the faces the network predicts, unrepaired
@@ -141,6 +147,8 @@ const SPEC: Spec = Spec {
         "--second-pass-tau",
         "--second-pass-cover",
         "--watertight-max-loop",
+        "--rounds",
+        "--small-cloud-rounds",
     ],
     switches: &[
         "--no-postprocess",
@@ -183,6 +191,32 @@ fn load_models(cmd: &str, value: &str) -> Result<Vec<(String, Model)>> {
     names.iter().map(|n| Ok((n.to_string(), Model::load(Path::new(n))?))).collect()
 }
 
+/// `--rounds N` and `--small-cloud-rounds P,N` into `cfg`.
+fn parse_rounds(a: &Args, cmd: &str, cfg: &mut ReconstructConfig) -> Result<()> {
+    const MAX: usize = point2quad::pipeline::model::MAX_REFINE_ROUNDS;
+    if a.value("--rounds").is_some() {
+        cfg.max_rounds = Some(a.parsed_in(cmd, "--rounds", 0usize, 0, MAX, "a model has at most that many")?);
+    }
+    if let Some(v) = a.value("--small-cloud-rounds") {
+        let bad = || {
+            Error::Usage(format!(
+                "{cmd}: --small-cloud-rounds {}: expected P,N (fewer than P points run at most N \
+                 rounds; P at least 1, N 0 to {MAX}; see `point2quad {cmd} --help`)",
+                v.escape_debug()
+            ))
+        };
+        let (p, n) = v.split_once(',').ok_or_else(bad)?;
+        let p: usize = p.trim().parse().map_err(|_| bad())?;
+        let n: usize = n.trim().parse().map_err(|_| bad())?;
+        if p == 0 || n > MAX {
+            return Err(bad());
+        }
+        cfg.small_cloud_points = p;
+        cfg.small_cloud_rounds = n;
+    }
+    Ok(())
+}
+
 pub fn run(argv: &[String]) -> Result<()> {
     let cmd = "reconstruct";
     let a = Args::parse(cmd, argv, &SPEC)?;
@@ -217,6 +251,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         "a rank among a point's candidates",
     )? as u16;
     crate::cmd_candidates::parse_far(&a, cmd, &mut cfg.candidates)?;
+    parse_rounds(&a, cmd, &mut cfg)?;
     let pp = &mut cfg.postprocess;
     pp.max_floater_faces = a.parsed(cmd, "--max-floater-faces", pp.max_floater_faces)?;
     pp.rescue.min_prob =

@@ -78,6 +78,7 @@ fn work_sizing_options_are_bounded() {
             huge,
         ),
         (vec!["reconstruct", c, "-o", &mesh, "--k", "65"], "--k must be between 3 and 64", "65"),
+        (vec!["reconstruct", c, "-o", &mesh, "--rounds", "9"], "--rounds must be between 0 and 8", "9"),
         (vec!["candidates", c, "-o", &cand, "--far", "65"], "--far must be between 0 and 64", "65"),
         (vec!["reconstruct", c, "-o", &mesh, "--far", huge], "--far must be between 0 and 64", huge),
         (
@@ -148,6 +149,36 @@ fn work_sizing_options_are_bounded() {
             assert!(idx.len() == 4 && idx.iter().all(|&i| i < 30), "{line}");
         }
     }
+}
+
+/// `reconstruct --small-cloud-rounds P,N` (session 34): malformed or out-of-range values
+/// are usage errors that write nothing; a cloud of fewer than P points gives what
+/// `--rounds N` gives, one of P points what no limit gives.
+#[test]
+fn small_cloud_rounds_is_checked_and_limits_small_clouds() {
+    let dir = Scratch::new("cli_small_cloud");
+    let c = &dir.write("sheet.xyz", sheet().as_bytes());
+    let mesh = dir.p("m.obj");
+    let before = dir.entries();
+    for bad in ["200", "0,5", "200,9", "a,5", "200,", ",5", "-1,5", "200,5,1"] {
+        let out = p2q(&["reconstruct", c, "-o", &mesh, "--small-cloud-rounds", bad]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{bad}: {err}");
+        assert!(err.contains(&format!("--small-cloud-rounds {bad}: expected P,N")), "{bad}: {err}");
+        assert_eq!(dir.entries(), before, "{bad}: files left behind");
+    }
+    let run = |name: &str, opts: &[&str]| -> Vec<u8> {
+        let path = dir.p(name);
+        let mut args = vec!["reconstruct", c.as_str(), "-o", &path];
+        args.extend_from_slice(opts);
+        let out = p2q(&args);
+        assert!(out.status.success(), "{opts:?}: {}", String::from_utf8_lossy(&out.stderr));
+        std::fs::read(&path).expect("test: mesh written")
+    };
+    // The sheet has 30 points.
+    assert_eq!(run("a.obj", &["--small-cloud-rounds", "31,0"]), run("b.obj", &["--rounds", "0"]));
+    assert_eq!(run("c.obj", &["--small-cloud-rounds", "30,0"]), run("d.obj", &[]));
+    assert_eq!(run("e.obj", &["--small-cloud-rounds", "31,2"]), run("f.obj", &["--rounds", "2"]));
 }
 
 /// `reconstruct --per-point` (session 23) sizes the candidate budget as `candidates`

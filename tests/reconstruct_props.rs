@@ -317,3 +317,65 @@ fn extreme_power_of_two_scales_give_identical_faces() {
         }
     }
 }
+
+/// `max_rounds` and the small-cloud limit run the model's first rounds: the raw faces
+/// equal those of the same stages by hand with the rounds cut short (the shipped
+/// weights, five rounds); a cloud of exactly `small_cloud_points` points is not small;
+/// and the rounds change the faces, so the check can fail.
+#[test]
+fn fewer_rounds_score_as_the_rounds_cut_short() {
+    let model = shipped();
+    let all = model.refiner().expect("test: the shipped weights have rounds").rounds.len();
+    let mut changed = 0;
+    for (kind, seed) in [(0u8, 3u64), (1, 4), (2, 5), (3, 6)] {
+        let pts = cloud(kind, seed);
+        let raw = ReconstructConfig { run_postprocess: false, second_pass: None, ..Default::default() };
+        // The same stages by hand, on the points in coordinate order, with `n` rounds.
+        let mut order: Vec<usize> = (0..pts.len()).collect();
+        order.sort_by(|&a, &b| {
+            let (p, q) = (pts[a], pts[b]);
+            p[0].total_cmp(&q[0]).then(p[1].total_cmp(&q[1])).then(p[2].total_cmp(&q[2]))
+        });
+        let sorted_pts: Vec<[f64; 3]> = order.iter().map(|&i| pts[i]).collect();
+        let local = Frame::fit(&sorted_pts).unwrap().to_local_all(&sorted_pts);
+        let c = generate(&local, &raw.candidates).unwrap();
+        let base = model
+            .predict_base(&local, &c.quads, &face_input(&local, &c, model.config().use_context))
+            .unwrap();
+        let by_hand = |n: usize| -> Vec<[u32; 4]> {
+            let mut cut = model.refiner().unwrap().clone();
+            cut.rounds.truncate(n);
+            let p = cut.apply(&model.params, &local, &c.quads, &base).unwrap();
+            c.quads
+                .iter()
+                .zip(&p)
+                .filter(|(_, &p)| p > raw.threshold)
+                .map(|(q, _)| q.map(|v| order[v as usize] as u32))
+                .collect()
+        };
+        let run = |cfg: &ReconstructConfig| reconstruct(&pts, model, cfg).expect("reconstruct").quads;
+        let full = run(&raw);
+        assert_eq!(full, by_hand(all), "kind {kind}: every round");
+        for n in [0, 2, all - 1] {
+            let want = by_hand(n);
+            assert_eq!(
+                run(&ReconstructConfig { max_rounds: Some(n), ..raw.clone() }),
+                want,
+                "kind {kind}: --rounds {n}"
+            );
+            let small =
+                ReconstructConfig { small_cloud_points: pts.len() + 1, small_cloud_rounds: n, ..raw.clone() };
+            assert_eq!(run(&small), want, "kind {kind}: a small cloud, {n} rounds");
+            let not_small = ReconstructConfig { small_cloud_points: pts.len(), ..small.clone() };
+            assert_eq!(run(&not_small), full, "kind {kind}: {} points is not fewer", pts.len());
+            // Both limits: the lower one holds.
+            let both = ReconstructConfig { max_rounds: Some(all), ..small };
+            assert_eq!(run(&both), want, "kind {kind}: both limits");
+            changed += usize::from(want != full);
+        }
+    }
+    assert!(
+        changed >= 4,
+        "the rounds changed the faces in only {changed} of 12 cases: the check could not fail"
+    );
+}

@@ -1234,4 +1234,42 @@ mod tests {
         let diff = moved.iter().zip(&got).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
         assert!(diff > 1e-3, "the check could not fail: {diff}");
     }
+
+    /// Running the first `n` rounds equals running a copy of the rounds cut to `n`
+    /// (what a model refined with `n` rounds holds), for every `n`, on random
+    /// candidates of a random cloud; and the rounds differ, so the check can fail.
+    #[test]
+    fn the_first_rounds_equal_the_rounds_cut_short() {
+        let mut params = ParamStore::new();
+        let mut rng = Rng::new(11);
+        let refiner =
+            Refiner::new(&mut params, 4, &[16, 8], SideRule::Normals, RefineInput::Flow, &mut rng).unwrap();
+        let n_points = 60u32;
+        let points: Vec<[f32; 3]> = (0..n_points)
+            .map(|_| {
+                [rng.uniform(-1.0, 1.0) as f32, rng.uniform(-1.0, 1.0) as f32, rng.uniform(-0.1, 0.1) as f32]
+            })
+            .collect();
+        let mut quads = Vec::new();
+        while quads.len() < 300 {
+            let q = [0; 4].map(|_| rng.below(n_points as usize) as u32);
+            if (0..4).all(|i| (i + 1..4).all(|j| q[i] != q[j])) {
+                quads.push(q);
+            }
+        }
+        let base: Vec<f32> = quads.iter().map(|_| rng.uniform(0.0, 1.0) as f32).collect();
+        let mut previous: Option<Vec<f32>> = None;
+        for n in 0..=5 {
+            let got = refiner.apply_first(&params, &points, &quads, &base, n).unwrap();
+            let mut cut = refiner.clone();
+            cut.rounds.truncate(n);
+            let want = cut.apply(&params, &points, &quads, &base).unwrap();
+            assert_eq!(got, want, "first {n} rounds");
+            if let Some(prev) = previous.filter(|_| n <= 4) {
+                assert_ne!(prev, got, "round {n} changed nothing: the check could not fail");
+            }
+            previous = Some(got);
+        }
+        assert_eq!(refiner.apply(&params, &points, &quads, &base).unwrap(), previous.unwrap());
+    }
 }

@@ -195,7 +195,8 @@ fn load_models(cmd: &str, value: &str) -> Result<Vec<(String, Model)>> {
 fn parse_rounds(a: &Args, cmd: &str, cfg: &mut ReconstructConfig) -> Result<()> {
     const MAX: usize = point2quad::pipeline::model::MAX_REFINE_ROUNDS;
     if a.value("--rounds").is_some() {
-        cfg.max_rounds = Some(a.parsed_in(cmd, "--rounds", 0usize, 0, MAX, "a model has at most that many")?);
+        cfg.max_rounds =
+            Some(a.parsed_in(cmd, "--rounds", 0usize, 0, MAX, "a model has at most that many")?);
     }
     if let Some(v) = a.value("--small-cloud-rounds") {
         let bad = || {

@@ -138,6 +138,18 @@ fn parse_xyz(bytes: &[u8], name: &str) -> Result<Vec<[f64; 3]>> {
         }
         let mut p = [0.0; 3];
         if columns == [0, 1, 2] {
+            // A CSV row (its coordinates not all before the first comma) with an empty
+            // field among the first three: the merged separators would read the next
+            // column in its place (`,1,2,3` gave (1, 2, 3); session 34's audit).
+            let data = without_comment(raw);
+            if text::find_byte(data, b',').is_some() {
+                let first = data.split(|&b| b == b',').next().unwrap_or_default();
+                if first.split(|&b| text::is_space(b)).filter(|t| !t.is_empty()).count() < 3 {
+                    if let Some(k) = fields(raw).iter().take(3).position(|f| f.is_empty()) {
+                        return Err(Error::parse(name, ln, format!("point {i}: field {} is empty", k + 1)));
+                    }
+                }
+            }
             p[0] = coord(t0, name, ln, &format_args!("point {i}"))?;
             for (axis, c) in p.iter_mut().enumerate().skip(1) {
                 let tok = toks.next().ok_or_else(|| {
@@ -474,6 +486,11 @@ mod tests {
             // header; a short comma line still counts its values.
             (b"x,y,z\n0.0,,0.0\n", "t.xyz:2: point 0: field 2 is empty"),
             (b"1,2,3\n,2,3\n", "t.xyz:2: point 1: field 1 is empty"),
+            // Still with three values after it (session 34's audit: read as (1, 2, 3)).
+            (b",1,2,3\n", "t.xyz:1: point 0: field 1 is empty"),
+            (b"0,0,0\n1,,2,3\n", "t.xyz:2: point 1: field 2 is empty"),
+            (b"0,0,0\n1,2,,3\n", "t.xyz:2: point 1: field 3 is empty"),
+            (b"0,0,0\n1, ,2,3\n", "t.xyz:2: point 1: field 2 is empty"),
             (b"1,2,3\n1,2\n", "t.xyz:2: point 1: needs 3 coordinates, found 2"),
             (b"1 2 3\nx y z\n", "t.xyz:2: point 1: bad number 'x'"),
             (b"x y\n1 2 3\n", "t.xyz:1: point 0: bad number 'x'"),

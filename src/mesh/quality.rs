@@ -122,7 +122,9 @@ pub const CHAMFER_SAMPLES: usize = 10_000;
 /// bounding-box diagonal.
 pub const MATCH_TOLERANCE: f64 = 1e-5;
 
-/// Frame coordinates are clamped to this many ground-truth diagonals (finite in f32).
+/// Frame coordinates are clamped to this many ground-truth diagonals (finite in f32);
+/// a predicted face with a vertex beyond it is an error of [`compare`], since its
+/// Chamfer distance would come out clamped (session 34's audit: 2e30 for any farther).
 const FAR_CLAMP: f64 = 1e30;
 
 /// One undirected edge and how many face sides use it.
@@ -523,6 +525,21 @@ fn mean_nearest(from: &[[f64; 3]], to: &[[f64; 3]]) -> f64 {
     d.iter().sum::<f64>() / from.len().max(1) as f64
 }
 
+/// Per vertex of `m`, the faces that use it (each once, in face order).
+fn vertex_faces(m: &PolyMesh) -> Vec<Vec<u32>> {
+    let mut out = vec![Vec::new(); m.vertices.len()];
+    for (f, face) in m.faces.iter().enumerate() {
+        for &v in face {
+            if let Some(list) = out.get_mut(v as usize) {
+                if list.last() != Some(&(f as u32)) {
+                    list.push(f as u32);
+                }
+            }
+        }
+    }
+    out
+}
+
 /// Compares a predicted mesh with the ground truth (DESIGN §7): Chamfer distance on
 /// [`CHAMFER_SAMPLES`] area-weighted samples per mesh (deterministic from `seed`;
 /// the two meshes use different streams, so a mesh against itself gives the sampling
@@ -537,7 +554,8 @@ fn mean_nearest(from: &[[f64; 3]], to: &[[f64; 3]]) -> f64 {
 ///
 /// # Errors
 /// `InvalidInput` when the ground truth has no face, no finite vertex or a zero
-/// bounding-box diagonal.
+/// bounding-box diagonal, or a predicted face has a finite vertex more than 1e30
+/// ground-truth diagonals from its centre.
 pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
     if gt.faces.is_empty() {
         return Err(Error::invalid("ground-truth mesh has no faces"));
@@ -557,6 +575,17 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
     // gives a finite distance and a finite f32 point.
     // A non-finite vertex stays non-finite (the sampler and the kd-tree skip it)
     // rather than being clamped into a finite point that could match.
+    let far = pred.faces.iter().flatten().find_map(|&v| {
+        let p = pred.vertices.get(v as usize)?;
+        let d = (0..3).map(|k| ((p[k] - centre[k]) / diag).abs()).fold(0.0, f64::max);
+        (p.iter().all(|c| c.is_finite()) && d > FAR_CLAMP).then_some((v, d))
+    });
+    if let Some((v, d)) = far {
+        return Err(Error::invalid(format!(
+            "predicted vertex {v} lies {d:.3e} ground-truth bounding-box diagonals from the ground truth \
+             (more than {FAR_CLAMP:e}): its Chamfer distance cannot be measured; are the two meshes in one frame?"
+        )));
+    }
     let frame = |p: [f64; 3]| -> [f64; 3] {
         if !p.iter().all(|c| c.is_finite()) {
             return p;
@@ -590,20 +619,45 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
     // the face match: meshes exported with split seams repeat positions, and a face
     // of the prediction cannot say which copy it meant. Each maps to the smallest
     // index at its position (the f32 search is wide; f64 decides).
+    // Two vertices of one face are never one vertex, however close (a sliver edge;
+    // session 34's audit: a mesh scored against itself lost the face), and seam copies
+    // never share a face.
+    let faces_of = vertex_faces(gt);
+    let share_face = |a: usize, b: usize| {
+        let (fa, fb) = (faces_of.get(a).map_or(&[][..], |v| v), faces_of.get(b).map_or(&[][..], |v| v));
+        fa.iter().any(|f| fb.contains(f))
+    };
     let search_sq = (4.0 * tol_sq) as f32;
     let canon: Vec<u32> = crate::par::map(gt_pts.len(), |i| {
         let mut near = Vec::new();
         tree.within_radius(crate::math::to_f32(gt_pts[i]), search_sq, &mut near);
         near.iter()
             .map(|n| n.index)
-            .filter(|&j| crate::math::dist_sq(gt_pts[i], gt_pts[j as usize]) <= tol_sq)
+            .filter(|&j| {
+                crate::math::dist_sq(gt_pts[i], gt_pts[j as usize]) <= tol_sq && !share_face(i, j as usize)
+            })
             .min()
             .map_or(i as u32, |j| j.min(i as u32))
     });
+    // The nearest in f64 among those the f32 search finds (two ground-truth vertices
+    // closer than f32 resolves are told apart; ties go to the smallest index).
     let matched: Vec<Option<u32>> = crate::par::map(pred_f.vertices.len(), |i| {
         let p = pred_f.vertices[i];
-        let nb = tree.nearest(crate::math::to_f32(p))?;
-        (crate::math::dist_sq(p, gt_pts[nb.index as usize]) <= tol_sq).then(|| canon[nb.index as usize])
+        if !p.iter().all(|c| c.is_finite()) {
+            return None;
+        }
+        let mut near = Vec::new();
+        tree.within_radius(crate::math::to_f32(p), search_sq, &mut near);
+        // Squared distances under 1e-308 underflow to 0: at a tie, a vertex at the very
+        // same position wins.
+        near.iter()
+            .map(|n| {
+                let q = gt_pts[n.index as usize];
+                (crate::math::dist_sq(p, q), p != q, n.index)
+            })
+            .filter(|&(d, ..)| d <= tol_sq)
+            .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)))
+            .map(|(.., j)| canon[j as usize])
     });
     let matched_vertices = matched.iter().filter(|m| m.is_some()).count();
 
@@ -904,6 +958,83 @@ mod tests {
         welded.vertices[5] = [9.0, 9.0, 9.0];
         let r = compare(&welded, &m, 0).unwrap();
         assert_eq!((r.precision, r.recall), (1.0, 1.0));
+    }
+
+    /// Vertices of one face closer than the matching tolerance stay apart (a sliver
+    /// edge), as do vertices closer than f32 resolves: a mesh scored against itself
+    /// is perfect (session 34's audit: 2 of 3 faces, and 0 of 1 for a 1e-300-tall
+    /// quad), and a vertex matches the nearer of two in f64.
+    #[test]
+    fn vertices_of_one_face_are_never_merged() {
+        let sliver = PolyMesh {
+            vertices: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [1.0, 1e-7, 0.0],
+                [2.0, 0.0, 0.0],
+                [2.0, 1.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [1.0, 2.0, 0.0],
+            ],
+            faces: vec![vec![0, 1, 5, 6], vec![1, 3, 4, 2], vec![2, 4, 7, 5]],
+        };
+        let r = compare(&sliver, &sliver, 0).unwrap();
+        assert_eq!((r.precision, r.recall, r.matched_vertices), (1.0, 1.0, 8));
+        for h in [1e-300, 1e-20, 1e-9] {
+            let flat = quad([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, h, 0.0], [0.0, h, 0.0]]);
+            let r = compare(&flat, &flat, 0).unwrap();
+            assert_eq!((r.precision, r.recall), (1.0, 1.0), "height {h}");
+        }
+        // Two faces' vertices 4e-8 apart (unresolved in f32 at 1.0): the prediction's
+        // copy of each matches its own.
+        let mut two = sliver.clone();
+        two.vertices[2] = [1.0, 4e-8, 0.0];
+        let r = compare(&two, &two, 0).unwrap();
+        assert_eq!((r.precision, r.recall), (1.0, 1.0));
+        let mut swapped = two.clone();
+        swapped.vertices.swap(1, 2);
+        for f in &mut swapped.faces {
+            for v in f.iter_mut() {
+                *v = match *v {
+                    1 => 2,
+                    2 => 1,
+                    v => v,
+                };
+            }
+        }
+        let r = compare(&swapped, &two, 0).unwrap();
+        assert_eq!((r.precision, r.recall), (1.0, 1.0));
+        // The two positions exchanged but the faces kept: the faces using one of them
+        // now name the other vertex and no longer match; the face using both still does.
+        let mut crossed = two.clone();
+        crossed.vertices.swap(1, 2);
+        let r = compare(&crossed, &two, 0).unwrap();
+        assert_eq!((r.precision, r.recall), (1.0 / 3.0, 1.0 / 3.0));
+    }
+
+    /// A predicted face farther than the clamp is an error naming its vertex, not a
+    /// clamped Chamfer distance; just inside it the distance is measured.
+    #[test]
+    fn a_prediction_beyond_the_clamp_is_an_error() {
+        let unit = quad([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]]);
+        for d in [1e31, 1e35, 1e100, 1e300] {
+            let mut moved = unit.clone();
+            moved.vertices[2][2] += d;
+            let e = compare(&moved, &unit, 0).unwrap_err().to_string();
+            assert!(e.contains("predicted vertex 2 lies") && e.contains("diagonals"), "{d}: {e}");
+        }
+        let mut moved = unit.clone();
+        for p in &mut moved.vertices {
+            p[2] += 1e20;
+        }
+        let c = compare(&moved, &unit, 0).unwrap().chamfer.unwrap();
+        let want = 2.0 * 1e20 / 2f64.sqrt();
+        assert!((c / want - 1.0).abs() < 1e-3, "{c} vs {want}");
+        // A far vertex no face uses does not matter.
+        let mut stray = unit.clone();
+        stray.vertices.push([1e300, 0.0, 0.0]);
+        assert_eq!(compare(&stray, &unit, 0).unwrap().precision, 1.0);
     }
 
     #[test]

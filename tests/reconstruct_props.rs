@@ -329,7 +329,13 @@ fn fewer_rounds_score_as_the_rounds_cut_short() {
     let mut changed = 0;
     for (kind, seed) in [(0u8, 3u64), (1, 4), (2, 5), (3, 6)] {
         let pts = cloud(kind, seed);
-        let raw = ReconstructConfig { run_postprocess: false, second_pass: None, ..Default::default() };
+        // No small-cloud limit unless a case sets one.
+        let raw = ReconstructConfig {
+            run_postprocess: false,
+            second_pass: None,
+            small_cloud_points: 0,
+            ..Default::default()
+        };
         // The same stages by hand, on the points in coordinate order, with `n` rounds.
         let mut order: Vec<usize> = (0..pts.len()).collect();
         order.sort_by(|&a, &b| {

@@ -547,8 +547,9 @@ fn vertex_faces(m: &PolyMesh) -> Vec<Vec<u32>> {
 /// [`MATCH_TOLERANCE`] × the ground truth's bounding-box diagonal. A predicted face
 /// counts when its vertices match distinct ground-truth vertices that are exactly the
 /// vertex set of a ground-truth face (ground-truth vertices at one position, within the
-/// tolerance, count as one vertex: split seams do not hide faces); a ground-truth face counts as recalled when
-/// some counted predicted face has its vertex set.
+/// tolerance, that share no face count as one vertex: split seams do not hide faces); a
+/// ground-truth face counts as recalled when some counted predicted face has its vertex
+/// set.
 ///
 /// An empty prediction scores as documented on [`GtMetrics`].
 ///
@@ -569,12 +570,7 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
     }
     // Halves first: lo + hi overflows for far-away (1e308) meshes.
     let centre: [f64; 3] = std::array::from_fn(|k| 0.5 * lo[k] + 0.5 * hi[k]);
-    // Everything below works in the ground truth's unit-diagonal frame, centred, so
-    // that f32 kd-tree coordinates keep ~1e-7 relative precision. Coordinates are
-    // clamped to ±1e30 diagonals so that an absurdly far (finite) prediction still
-    // gives a finite distance and a finite f32 point.
-    // A non-finite vertex stays non-finite (the sampler and the kd-tree skip it)
-    // rather than being clamped into a finite point that could match.
+    // A predicted face beyond the clamp would get a clamped Chamfer distance.
     let far = pred.faces.iter().flatten().find_map(|&v| {
         let p = pred.vertices.get(v as usize)?;
         let d = (0..3).map(|k| ((p[k] - centre[k]) / diag).abs()).fold(0.0, f64::max);
@@ -586,6 +582,12 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
              (more than {FAR_CLAMP:e}): its Chamfer distance cannot be measured; are the two meshes in one frame?"
         )));
     }
+    // Everything below works in the ground truth's unit-diagonal frame, centred, so
+    // that f32 kd-tree coordinates keep ~1e-7 relative precision. Coordinates are
+    // clamped to ±1e30 diagonals (after the check above only vertices no face uses
+    // can lie beyond) so that every f32 point is finite.
+    // A non-finite vertex stays non-finite (the sampler and the kd-tree skip it)
+    // rather than being clamped into a finite point that could match.
     let frame = |p: [f64; 3]| -> [f64; 3] {
         if !p.iter().all(|c| c.is_finite()) {
             return p;
@@ -986,8 +988,8 @@ mod tests {
             let r = compare(&flat, &flat, 0).unwrap();
             assert_eq!((r.precision, r.recall), (1.0, 1.0), "height {h}");
         }
-        // Two faces' vertices 4e-8 apart (unresolved in f32 at 1.0): the prediction's
-        // copy of each matches its own.
+        // The sliver 4e-8 long (below f32 resolution at 1.0): each predicted vertex
+        // matches its own, also with the two numbered the other way.
         let mut two = sliver.clone();
         two.vertices[2] = [1.0, 4e-8, 0.0];
         let r = compare(&two, &two, 0).unwrap();

@@ -167,18 +167,31 @@ fn small_cloud_rounds_is_checked_and_limits_small_clouds() {
         assert!(err.contains(&format!("--small-cloud-rounds {bad}: expected P,N")), "{bad}: {err}");
         assert_eq!(dir.entries(), before, "{bad}: files left behind");
     }
+    // A noisy torus, where the rounds change the faces (on the sheet they do not).
+    let torus = dir.p("torus.xyz");
+    let out = p2q(&["synth", "--shape", "torus", "--seed", "1", "-o", &torus]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let n = std::fs::read_to_string(&torus).expect("test: cloud").lines().count();
     let run = |name: &str, opts: &[&str]| -> Vec<u8> {
         let path = dir.p(name);
-        let mut args = vec!["reconstruct", c.as_str(), "-o", &path];
+        let mut args = vec!["reconstruct", torus.as_str(), "-o", &path];
         args.extend_from_slice(opts);
         let out = p2q(&args);
         assert!(out.status.success(), "{opts:?}: {}", String::from_utf8_lossy(&out.stderr));
         std::fs::read(&path).expect("test: mesh written")
     };
-    // The sheet has 30 points.
-    assert_eq!(run("a.obj", &["--small-cloud-rounds", "31,0"]), run("b.obj", &["--rounds", "0"]));
-    assert_eq!(run("c.obj", &["--small-cloud-rounds", "30,0"]), run("d.obj", &[]));
-    assert_eq!(run("e.obj", &["--small-cloud-rounds", "31,2"]), run("f.obj", &["--rounds", "2"]));
+    let (all, none, two) =
+        (run("d.obj", &[]), run("b.obj", &["--rounds", "0"]), run("f.obj", &["--rounds", "2"]));
+    assert!(
+        all != none && all != two && none != two,
+        "the rounds change nothing here: the checks could not fail"
+    );
+    // Small: P above the point count. Not small: P at half of it (the second pass
+    // scores the cloud without the points it takes for noise, so P = n would catch it).
+    let (small, not_small) = (format!("{},0", n + 1), format!("{},0", n / 2));
+    assert_eq!(run("a.obj", &["--small-cloud-rounds", &small]), none);
+    assert_eq!(run("c.obj", &["--small-cloud-rounds", &not_small]), all);
+    assert_eq!(run("e.obj", &["--small-cloud-rounds", &format!("{},2", n + 1)]), two);
 }
 
 /// `reconstruct --per-point` (session 23) sizes the candidate budget as `candidates`

@@ -625,10 +625,7 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
     // session 34's audit: a mesh scored against itself lost the face), and seam copies
     // never share a face.
     let faces_of = vertex_faces(gt);
-    let share_face = |a: usize, b: usize| {
-        let (fa, fb) = (faces_of.get(a).map_or(&[][..], |v| v), faces_of.get(b).map_or(&[][..], |v| v));
-        fa.iter().any(|f| fb.contains(f))
-    };
+    let share_face = |a: usize, b: usize| faces_of[a].iter().any(|f| faces_of[b].contains(f));
     let search_sq = (4.0 * tol_sq) as f32;
     let canon: Vec<u32> = crate::par::map(gt_pts.len(), |i| {
         let mut near = Vec::new();

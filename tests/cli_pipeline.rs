@@ -739,7 +739,7 @@ fn reconstruct_second_pass_option() {
         (&["--second-pass", "both"][..], "expected average, replace or off"),
         (&["--second-pass", "off", "--second-pass-tau", "0.3"], "with --second-pass off"),
         (&["--second-pass", "off", "--second-pass-cover", "all"], "with --second-pass off"),
-        (&["--second-pass", "average", "--second-pass-cover", "some"], "expected believed or all"),
+        (&["--second-pass", "average", "--second-pass-cover", "some"], "expected believed, all or learned"),
         (&["--second-pass", "average", "--second-pass-tau", "11"], "--second-pass-tau"),
         (&["--second-pass", "average", "--second-pass-tau", "nan"], "--second-pass-tau"),
         (&["--second-pass", "average", "--no-postprocess"], "no effect with --no-postprocess"),

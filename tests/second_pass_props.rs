@@ -8,8 +8,12 @@ use point2quad::pipeline::reconstruct::{
     reconstruct, reconstruct_observed, reconstruct_with_report, ReconstructConfig, SecondPass,
     SecondPassCover, SecondPassMode, StageDone,
 };
-use point2quad::pipeline::second_pass::{covered_unused, covered_unused_by};
+use point2quad::pipeline::second_pass::{
+    covered_unused, covered_unused_by, learned_noise, point_features, LEARNED_CUTOFF, LEARNED_WEIGHTS,
+    NOISE_FEATURES,
+};
 use point2quad::rng::Rng;
+use point2quad::spatial::kdtree::dist_sq;
 use proptest::prelude::*;
 #[path = "common/shipped.rs"]
 mod shipped;
@@ -169,6 +173,179 @@ proptest! {
     }
 }
 
+/// Candidates for [`point_features`]' reference: the scene's faces, quads of four grid
+/// points near each other (some folded or crossing), and quads with a loose point as a
+/// corner, each with a random probability (some under the 0.05 the "strictly inside"
+/// column ignores, some above 0.9); about half of the faces are "believed".
+fn candidates(
+    seed: u64,
+    pos: &[[f64; 3]],
+    np: usize,
+    quads: &[[u32; 4]],
+) -> (Vec<[u32; 4]>, Vec<f32>, Vec<[u32; 4]>) {
+    let mut rng = Rng::new(seed ^ 0x5eed);
+    let mut cands: Vec<[u32; 4]> = quads.to_vec();
+    // Not the scene's four collinear points (np − 4 ..): a quad with three of them has a
+    // triangle of no area, on which the library's sign test and the reference's
+    // tolerance disagree by design.
+    let pool = np - 4;
+    for _ in 0..3 * quads.len() {
+        let a = rng.below(pool);
+        // Three more among the points nearest a (brute force), drawn from the 8 nearest.
+        let mut order: Vec<usize> = (0..pool).filter(|&j| j != a).collect();
+        order.sort_by(|&i, &j| {
+            let di = dot(sub(pos[i], pos[a]), sub(pos[i], pos[a]));
+            let dj = dot(sub(pos[j], pos[a]), sub(pos[j], pos[a]));
+            di.total_cmp(&dj)
+        });
+        let mut pick = vec![a];
+        while pick.len() < 4 {
+            let j = order[rng.below(8.min(order.len()))];
+            if !pick.contains(&j) {
+                pick.push(j);
+            }
+        }
+        cands.push([pick[0], pick[1], pick[2], pick[3]].map(|v| v as u32));
+    }
+    let probs: Vec<f32> = cands
+        .iter()
+        .map(|_| match rng.below(4) {
+            0 => 0.04 * rng.f64() as f32,
+            1 => 0.9 + 0.1 * rng.f64() as f32,
+            _ => rng.f64() as f32,
+        })
+        .collect();
+    let believed: Vec<[u32; 4]> = quads.iter().copied().filter(|_| rng.f64() < 0.5).collect();
+    (cands, probs, believed)
+}
+
+/// An independent reference for [`point_features`]: every candidate tried for every
+/// point (no grid, no kd-tree), the point-in-face test of [`brute_by`], nearest
+/// neighbours by sorting all distances. Returns the columns and, per point, whether it
+/// lies within a hair of a point-in-face decision (then the inside columns are not
+/// compared).
+#[allow(clippy::too_many_arguments)]
+fn reference_features(
+    local: &[[f32; 3]],
+    pos: &[[f64; 3]],
+    np: usize,
+    cands: &[[u32; 4]],
+    probs: &[f32],
+    mesh: &[[u32; 4]],
+    believed: &[[u32; 4]],
+    threshold: f32,
+    tau: f64,
+) -> (Vec<[f32; NOISE_FEATURES]>, Vec<bool>) {
+    let inside = |t: f64, users: &[[u32; 4]], quads: &[[u32; 4]]| brute_by(pos, np, users, quads, t);
+    let above = |t: f32| -> Vec<[u32; 4]> {
+        cands.iter().zip(probs).filter(|(_, &p)| p > t).map(|(q, _)| *q).collect()
+    };
+    let mut hair = vec![false; np];
+    let mut at = |f: &dyn Fn(f64) -> Vec<bool>| -> Vec<bool> {
+        let (lo, hi) = (f(tau * (1.0 - 1e-9)), f(tau * (1.0 + 1e-9)));
+        (0..np).for_each(|i| hair[i] |= lo[i] != hi[i]);
+        f(tau)
+    };
+    let rule = at(&|t| inside(t, mesh, believed));
+    let any = at(&|t| inside(t, mesh, mesh));
+    let in_above = at(&|t| inside(t, &[], &above(threshold)));
+    let in_above9 = at(&|t| inside(t, &[], &above(0.9)));
+    // "Strictly inside": a quad holds the point and the point is not its corner.
+    let mut span = vec![0f32; np];
+    let mut span_mesh = vec![0f32; np];
+    for (list, ps, out) in [(cands, probs.to_vec(), &mut span), (mesh, vec![1.0; mesh.len()], &mut span_mesh)]
+    {
+        for (q, &p) in list.iter().zip(&ps) {
+            if p < 0.05 {
+                continue;
+            }
+            let held = at(&|t| inside(t, &[], &[*q]));
+            for i in 0..np {
+                if held[i] && !q.contains(&(i as u32)) {
+                    out[i] = out[i].max(p);
+                }
+            }
+        }
+    }
+    let x = (0..np)
+        .map(|i| {
+            let mine: Vec<f32> =
+                cands.iter().zip(probs).filter(|(q, _)| q.contains(&(i as u32))).map(|(_, &p)| p).collect();
+            let (mut maxp, mut sum) = (0f32, 0f32);
+            for &p in &mine {
+                maxp = maxp.max(p);
+                sum += p;
+            }
+            let uses = |list: &[[u32; 4]]| list.iter().flatten().filter(|&&v| v as usize == i).count() as f32;
+            let mut d: Vec<f32> =
+                (0..np).filter(|&j| j != i).map(|j| dist_sq(local[i], local[j]).sqrt()).collect();
+            d.sort_by(f32::total_cmp);
+            let near: Vec<f32> = d.into_iter().take(9).collect();
+            let mean = near.iter().sum::<f32>() / near.len() as f32;
+            let flag = |b: bool| b as u8 as f32;
+            [
+                flag(uses(mesh) > 0.0),
+                flag(rule[i]),
+                flag(any[i]),
+                maxp,
+                sum / 4.0,
+                mine.len() as f32 / 10.0,
+                uses(mesh) / 4.0,
+                uses(believed) / 4.0,
+                flag(in_above[i]),
+                flag(in_above9[i]),
+                near[0] / mean,
+                near[1] / mean,
+                if mine.is_empty() { 0.0 } else { sum / mine.len() as f32 },
+                span[i],
+                span_mesh[i],
+                1.0,
+            ]
+        })
+        .collect();
+    (x, hair)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+
+    /// Every column of the learned test's input against the independent reference; the
+    /// inside columns skipped for points within a hair of a decision.
+    #[test]
+    fn point_features_equal_the_brute_force_reference(seed in 0u64..1_000_000, tau in 0.05f64..0.6) {
+        let (pos, np, mesh) = scene(seed);
+        let (cands, probs, believed) = candidates(seed, &pos, np, &mesh);
+        let local: Vec<[f32; 3]> = pos[..np].iter().map(|p| p.map(|x| x as f32)).collect();
+        let got = point_features(&local, &pos, np, &cands, &probs, &mesh, &believed, 0.5, tau);
+        let (want, hair) = reference_features(&local, &pos, np, &cands, &probs, &mesh, &believed, 0.5, tau);
+        prop_assert_eq!(got.len(), np);
+        let inside_columns = [1usize, 2, 8, 9, 13, 14];
+        // A corner of a quad lies on its triangles' boundary, where the library's sign
+        // test and the reference's tolerance may round apart: columns 8 and 9 (which do
+        // not leave the quads' own corners out) are not compared at such points.
+        let corner_of = |t: f32| {
+            let mut m = vec![false; np];
+            cands.iter().zip(&probs).filter(|(_, &p)| p > t).flat_map(|(q, _)| q.iter()).for_each(|&v| m[v as usize] = true);
+            m
+        };
+        let (corner5, corner9) = (corner_of(0.5), corner_of(0.9));
+        for i in 0..np {
+            for c in 0..NOISE_FEATURES {
+                if hair[i] && inside_columns.contains(&c) || c == 8 && corner5[i] || c == 9 && corner9[i] {
+                    continue;
+                }
+                prop_assert_eq!(got[i][c], want[i][c], "point {} column {}", i, c);
+            }
+        }
+        // The test is the weighted sum against the cutoff.
+        let noise = learned_noise(&got);
+        for i in 0..np {
+            let z: f32 = got[i].iter().zip(&LEARNED_WEIGHTS).map(|(a, b)| a * b).sum();
+            prop_assert_eq!(noise[i], z > LEARNED_CUTOFF);
+        }
+    }
+}
+
 /// A flat grid with points near some face centres (a noise model's points): the first
 /// pass leaves them unused and inside faces, the second pass drops exactly those, and
 /// no output face uses one; the output is a valid manifold mesh whose first vertices
@@ -211,6 +388,7 @@ fn the_second_pass_drops_the_points_inside_faces_and_keeps_the_mesh_valid() {
         (SecondPassMode::Replace, SecondPassCover::All),
         (SecondPassMode::Average, SecondPassCover::All),
         (SecondPassMode::Average, SecondPassCover::Believed),
+        (SecondPassMode::Average, SecondPassCover::Learned),
     ] {
         let cfg = ReconstructConfig {
             second_pass: Some(SecondPass { tau: 0.25, mode, cover }),

@@ -15,7 +15,7 @@ use crate::pipeline::candidates::{generate, CandidateConfig};
 use crate::pipeline::features::face_input;
 use crate::pipeline::frame::Frame;
 use crate::pipeline::model::Model;
-use crate::pipeline::second_pass::{covered_unused, covered_unused_by};
+use crate::pipeline::second_pass::{covered_unused, covered_unused_by, learned_noise, point_features};
 use crate::{Error, Result};
 
 /// Largest neighbour count that [`reconstruct`] accepts (the candidates' bound,
@@ -107,6 +107,10 @@ pub enum SecondPassCover {
     /// under a face the post-process added to close a hole may be a true vertex the
     /// first pass missed.
     Believed,
+    /// A learned test over 16 values per point, the [`SecondPassCover::Believed`] rule's
+    /// among them ([`crate::pipeline::second_pass::point_features`],
+    /// [`crate::pipeline::second_pass::learned_noise`]; session 35, off by default).
+    Learned,
 }
 
 /// How [`SecondPass`] combines the two passes' candidates.
@@ -310,12 +314,27 @@ pub fn reconstruct_observed(
             last = Some("second pass");
             let noise = match sp.cover {
                 SecondPassCover::All => covered_unused(&mesh.vertices, u, &mesh.quads, sp.tau),
-                SecondPassCover::Believed => {
+                SecondPassCover::Believed | SecondPassCover::Learned => {
                     let believed: std::collections::HashSet<[u32; 4]> =
                         faces.iter().map(|&q| corner_set(q)).collect();
                     let covering: Vec<[u32; 4]> =
                         mesh.quads.iter().copied().filter(|&q| believed.contains(&corner_set(q))).collect();
-                    covered_unused_by(&mesh.vertices, u, &mesh.quads, &covering, sp.tau)
+                    if sp.cover == SecondPassCover::Learned {
+                        let x = point_features(
+                            &local,
+                            &mesh.vertices,
+                            u,
+                            &quads,
+                            &probs,
+                            &mesh.quads,
+                            &covering,
+                            cfg.threshold,
+                            sp.tau,
+                        );
+                        learned_noise(&x)
+                    } else {
+                        covered_unused_by(&mesh.vertices, u, &mesh.quads, &covering, sp.tau)
+                    }
                 }
             };
             let kept: Vec<u32> = (0..u as u32).filter(|&i| !noise[i as usize]).collect();

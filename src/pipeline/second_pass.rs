@@ -242,6 +242,164 @@ impl Grid {
     }
 }
 
+/// Values per point that [`learned_noise`] reads ([`point_features`]).
+pub const NOISE_FEATURES: usize = 16;
+
+/// The learned test's weights, in [`point_features`]' column order (the last multiplies
+/// the constant column). Session 35: a logistic regression (Newton, L2 10⁻³) fitted on
+/// 787,489 points of clouds none of the judge's twelve meshes are in (40 random synthetic
+/// shapes, the other 38 `train/` meshes, their chord-collapsed and jittered copies),
+/// the values read with a held-out judge model (docs/EXPERIMENTS.md, "Session 35").
+pub const LEARNED_WEIGHTS: [f32; NOISE_FEATURES] = [
+    -0.335959, 0.919518, 0.91421, -1.92306, -1.57704, 0.0103905, -0.608237, -0.996397, -0.126796, -0.245259,
+    -0.143231, 0.555859, -0.143185, 1.37065, 1.02701, -0.558313,
+];
+
+/// A point is noise under the learned test when its weighted sum is above this (0: a
+/// probability above 0.5).
+pub const LEARNED_CUTOFF: f32 = 0.0;
+
+/// Candidates below this probability are not read by the "held strictly inside" column.
+const SPAN_MIN_PROB: f32 = 0.05;
+
+/// What the first pass says about each of the distinct points `positions[..u]`, for the
+/// learned noise test. `local` are the same points in f32 (the candidates' frame),
+/// `cands` / `probs` the first pass's candidates and probabilities, `mesh_quads` its
+/// finished mesh (corners may be vertices the hole filling added, past `u`),
+/// `believed_mesh` those of its faces the classifier predicted real. Columns:
+///
+/// | # | value |
+/// |---|---|
+/// | 0 | 1 when a face of the mesh uses the point |
+/// | 1 | 1 when no face uses it and a believed face holds it ([`covered_unused_by`], the default rule) |
+/// | 2 | 1 when no face uses it and any face holds it |
+/// | 3, 4, 5 | the largest probability of the candidates it is a corner of, their sum / 4, their count / 10 |
+/// | 6, 7 | how many faces of the mesh, and how many believed faces, use it, / 4 |
+/// | 8, 9 | 1 when a candidate above `threshold`, above 0.9, holds it (its corners included) |
+/// | 10, 11 | the distance to its nearest and second-nearest other point over the mean distance of its 9 nearest |
+/// | 12 | the mean probability of the candidates it is a corner of (0 for none) |
+/// | 13 | the largest probability (at least 0.05) of a candidate holding it strictly inside (not as a corner) |
+/// | 14 | 1 when a face of the mesh holds it strictly inside |
+/// | 15 | 1 (the constant) |
+///
+/// "Holds": the point lies within `tau` × the face's mean edge length of its plane and
+/// projects into it ([`covered_unused`]).
+///
+/// # Panics
+/// If a candidate's or face's index is out of range of `positions`, `u` exceeds
+/// `positions.len()` or `local.len()`, or `probs` is shorter than `cands`.
+#[allow(clippy::too_many_arguments)]
+pub fn point_features(
+    local: &[[f32; 3]],
+    positions: &[[f64; 3]],
+    u: usize,
+    cands: &[[u32; 4]],
+    probs: &[f32],
+    mesh_quads: &[[u32; 4]],
+    believed_mesh: &[[u32; 4]],
+    threshold: f32,
+    tau: f64,
+) -> Vec<[f32; NOISE_FEATURES]> {
+    let rule = covered_unused_by(positions, u, mesh_quads, believed_mesh, tau);
+    let any_face = covered_unused_by(positions, u, mesh_quads, mesh_quads, tau);
+    let above = |t: f32| -> Vec<[u32; 4]> {
+        cands.iter().zip(probs).filter(|(_, &p)| p > t).map(|(q, _)| *q).collect()
+    };
+    let in_above = covered_unused_by(positions, u, &[], &above(threshold), tau);
+    let in_above9 = covered_unused_by(positions, u, &[], &above(0.9), tau);
+    let (mut maxp, mut sump, mut count) = (vec![0f32; u], vec![0f32; u], vec![0f32; u]);
+    for (q, &p) in cands.iter().zip(probs) {
+        for &v in q.iter().filter(|&&v| (v as usize) < u) {
+            let v = v as usize;
+            maxp[v] = maxp[v].max(p);
+            sump[v] += p;
+            count[v] += 1.0;
+        }
+    }
+    let degree = |quads: &[[u32; 4]]| {
+        let mut d = vec![0f32; u];
+        quads.iter().flatten().filter(|&&v| (v as usize) < u).for_each(|&v| d[v as usize] += 1.0);
+        d
+    };
+    let (mesh_degree, believed_degree) = (degree(mesh_quads), degree(believed_mesh));
+    let knn = crate::pipeline::candidates::knn_table(&local[..u], 9);
+    let tree = crate::spatial::kdtree::KdTree::build(&local[..u]);
+    let span = strictly_inside(&tree, positions, u, cands, probs, tau);
+    let span_mesh = strictly_inside(&tree, positions, u, mesh_quads, &vec![1.0; mesh_quads.len()], tau);
+    (0..u)
+        .map(|i| {
+            // The first neighbour is the point itself (the points are distinct).
+            let ds: Vec<f32> = knn.row(i).1.iter().skip(1).map(|x| x.sqrt()).collect();
+            let mean = if ds.is_empty() { 1.0 } else { ds.iter().sum::<f32>() / ds.len() as f32 };
+            let near = |k: usize| ds.get(k).copied().unwrap_or(0.0) / mean.max(1e-12);
+            let flag = |b: bool| b as u8 as f32;
+            [
+                flag(mesh_degree[i] > 0.0),
+                flag(rule[i]),
+                flag(any_face[i]),
+                maxp[i],
+                sump[i] / 4.0,
+                count[i] / 10.0,
+                mesh_degree[i] / 4.0,
+                believed_degree[i] / 4.0,
+                flag(in_above[i]),
+                flag(in_above9[i]),
+                near(0),
+                near(1),
+                if count[i] > 0.0 { sump[i] / count[i] } else { 0.0 },
+                span[i],
+                span_mesh[i],
+                1.0,
+            ]
+        })
+        .collect()
+}
+
+/// For each of the points `positions[..u]` (indexed by `tree`, built over them in f32),
+/// the largest probability (at least [`SPAN_MIN_PROB`]) of a quad that holds it strictly
+/// inside: not as a corner, within `tau` × the quad's mean edge length of its plane,
+/// projecting into it. 0 where none does.
+fn strictly_inside(
+    tree: &crate::spatial::kdtree::KdTree,
+    positions: &[[f64; 3]],
+    u: usize,
+    quads: &[[u32; 4]],
+    probs: &[f32],
+    tau: f64,
+) -> Vec<f32> {
+    let mut best = vec![0f32; u];
+    let mut near = Vec::new();
+    for (q, &p) in quads.iter().zip(probs) {
+        if p < SPAN_MIN_PROB {
+            continue;
+        }
+        let Some(face) = FacePlane::new(positions, q, tau) else { continue };
+        let c = q.map(|v| positions[v as usize]);
+        let centre = [0, 1, 2].map(|a| (c[0][a] + c[1][a] + c[2][a] + c[3][a]) / 4.0);
+        let r2 = c.iter().map(|x| dot(sub(*x, centre), sub(*x, centre))).fold(0.0, f64::max);
+        // A point the quad holds projects into the corners' hull (within r of the
+        // centre) and lies within the slack of the plane; the margin covers f32 rounding.
+        let reach = ((r2.sqrt() + face.slack) * 1.0001).powi(2) as f32;
+        tree.within_radius(centre.map(|x| x as f32), reach, &mut near);
+        for n in &near {
+            let i = n.index as usize;
+            if i < u && !q.contains(&(i as u32)) && p > best[i] && face.contains(positions[i]) {
+                best[i] = p;
+            }
+        }
+    }
+    best
+}
+
+/// The learned test: which points are noise, from their [`point_features`]
+/// ([`LEARNED_WEIGHTS`], [`LEARNED_CUTOFF`]).
+pub fn learned_noise(features: &[[f32; NOISE_FEATURES]]) -> Vec<bool> {
+    features
+        .iter()
+        .map(|x| x.iter().zip(&LEARNED_WEIGHTS).map(|(a, b)| a * b).sum::<f32>() > LEARNED_CUTOFF)
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

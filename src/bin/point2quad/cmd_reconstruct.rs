@@ -114,8 +114,9 @@ OPTIONS:
                           units of the face's mean edge length, 0 <= T <= 10 [0.25]
     --second-pass-cover C which faces call the points inside them noise: `believed`
                           those the classifier predicted real, `all` every face of the
-                          first pass's mesh (rescued, filled and closing quads too)
-                          [believed]
+                          first pass's mesh (rescued, filled and closing quads too),
+                          `learned` a learned test over 16 values per point, the
+                          `believed` rule's among them (session 35) [believed]
     --watertight          close every hole at the end, at the price of faces that are
                           not the classifier's: each odd loop is paired with another
                           by splitting the strip of least believed faces between them
@@ -353,9 +354,10 @@ pub fn run(argv: &[String]) -> Result<()> {
             let cover = match a.value("--second-pass-cover") {
                 None | Some("believed") => SecondPassCover::Believed,
                 Some("all") => SecondPassCover::All,
+                Some("learned") => SecondPassCover::Learned,
                 Some(c) => {
                     return Err(Error::Usage(format!(
-                    "{cmd}: --second-pass-cover {}: expected believed or all (see `point2quad {cmd} --help`)",
+                    "{cmd}: --second-pass-cover {}: expected believed, all or learned (see `point2quad {cmd} --help`)",
                     c.escape_debug()
                 )))
                 }

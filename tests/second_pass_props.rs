@@ -5,8 +5,8 @@
 use point2quad::mesh::halfedge::HalfedgeMesh;
 use point2quad::mesh::validate::validate;
 use point2quad::pipeline::reconstruct::{
-    reconstruct, reconstruct_observed, reconstruct_with_report, ReconstructConfig, SecondPass,
-    SecondPassCover, SecondPassMode, StageDone,
+    first_pass_features, reconstruct, reconstruct_observed, reconstruct_with_report, ReconstructConfig,
+    SecondPass, SecondPassCover, SecondPassMode, StageDone,
 };
 use point2quad::pipeline::second_pass::{
     covered_unused, covered_unused_by, learned_noise, point_features, LEARNED_CUTOFF, LEARNED_WEIGHTS,
@@ -481,4 +481,33 @@ fn the_observer_hears_every_stage_in_order() {
             _ => assert!(pass2.is_empty() && last == Some("second pass"), "{case}: {:?}", rep.timings),
         }
     }
+}
+
+/// `first_pass_features` reads the points as the pipeline's second pass does: one row per
+/// distinct input point, and the learned test over its rows drops as many points as the
+/// second pass under `SecondPassCover::Learned` reports; the post-process is required.
+#[test]
+fn first_pass_features_are_what_the_learned_second_pass_reads() {
+    let (mut pts, _, _) = grid_with_noise();
+    pts.push(pts[3]); // a duplicate: not a row of its own
+    let cfg = ReconstructConfig {
+        second_pass: Some(SecondPass {
+            tau: 0.25,
+            mode: SecondPassMode::Average,
+            cover: SecondPassCover::Learned,
+        }),
+        ..Default::default()
+    };
+    let rows = first_pass_features(&pts, shipped(), &cfg).expect("features");
+    assert_eq!(rows.len(), pts.len() - 1);
+    let mut seen: Vec<u32> = rows.iter().map(|r| r.0).collect();
+    seen.sort_unstable();
+    assert_eq!(seen, (0..pts.len() as u32 - 1).collect::<Vec<_>>());
+    let x: Vec<[f32; NOISE_FEATURES]> = rows.iter().map(|r| r.1).collect();
+    let noise = learned_noise(&x).iter().filter(|&&b| b).count();
+    assert!(noise >= 1, "the test finds the grid's noise points");
+    let (_, rep) = reconstruct_with_report(&pts, shipped(), &cfg).expect("reconstruct");
+    assert_eq!(rep.second_pass_dropped, Some(noise));
+    let off = ReconstructConfig { run_postprocess: false, ..cfg };
+    assert!(first_pass_features(&pts, shipped(), &off).is_err());
 }

@@ -391,6 +391,52 @@ pub fn reconstruct_observed(
     Ok((mesh, report))
 }
 
+/// What [`SecondPassCover::Learned`]'s test reads about each point of `points`, as
+/// [`reconstruct`] computes it after its first pass: the input index of each distinct
+/// point the pipeline works on ([`PreparedCloud::distinct`]) with its
+/// [`point_features`]. The post-process runs as `cfg` says (it must run:
+/// `run_postprocess`); the second pass's `tau` is read from `cfg.second_pass` (0.25
+/// without one). For fitting the test (`examples/noise_test_fit.rs`).
+///
+/// # Errors
+/// As [`reconstruct`], and `InvalidInput` when `cfg.run_postprocess` is false.
+pub fn first_pass_features(
+    points: &[[f64; 3]],
+    model: &Model,
+    cfg: &ReconstructConfig,
+) -> Result<Vec<(u32, [f32; crate::pipeline::second_pass::NOISE_FEATURES])>> {
+    if !cfg.run_postprocess {
+        return Err(Error::invalid("the first pass's features need the post-process"));
+    }
+    crate::pipeline::candidates::check_neighbour_counts(&cfg.candidates)?;
+    let tau = cfg.second_pass.map_or(0.25, |sp| sp.tau);
+    let prep = prepare_cloud(points, cfg.merge_share)?;
+    let mut quiet = |_: StageDone| {};
+    let mut clock = Clock::new(&mut quiet);
+    let mut report = ReconstructReport::default();
+    let (quads, probs) = score_cloud(&prep.local, &[model], cfg, &mut clock, &mut report)?;
+    let (faces, face_probs, reserve, reserve_probs) = split_at_threshold(&quads, &probs, cfg.threshold);
+    let u = prep.uniq.len();
+    let local64: Vec<[f64; 3]> = prep.uniq.iter().map(|&p| prep.frame.to_local_f64(p)).collect();
+    let (mesh, _) =
+        postprocess_with_reserve(&local64, &faces, &face_probs, &reserve, &reserve_probs, &cfg.postprocess)?;
+    let believed: std::collections::HashSet<[u32; 4]> = faces.iter().map(|&q| corner_set(q)).collect();
+    let covering: Vec<[u32; 4]> =
+        mesh.quads.iter().copied().filter(|&q| believed.contains(&corner_set(q))).collect();
+    let x = point_features(
+        &prep.local,
+        &mesh.vertices,
+        u,
+        &quads,
+        &probs,
+        &mesh.quads,
+        &covering,
+        cfg.threshold,
+        tau,
+    );
+    Ok(prep.distinct.iter().copied().zip(x).collect())
+}
+
 /// Candidates of a normalised cloud and their probabilities (the members' mean):
 /// candidates, features, classification and refinement rounds, timed into `report`.
 fn score_cloud(

@@ -314,28 +314,18 @@ pub fn reconstruct_observed(
             last = Some("second pass");
             let noise = match sp.cover {
                 SecondPassCover::All => covered_unused(&mesh.vertices, u, &mesh.quads, sp.tau),
-                SecondPassCover::Believed | SecondPassCover::Learned => {
-                    let believed: std::collections::HashSet<[u32; 4]> =
-                        faces.iter().map(|&q| corner_set(q)).collect();
-                    let covering: Vec<[u32; 4]> =
-                        mesh.quads.iter().copied().filter(|&q| believed.contains(&corner_set(q))).collect();
-                    if sp.cover == SecondPassCover::Learned {
-                        let x = point_features(
-                            &local,
-                            &mesh.vertices,
-                            u,
-                            &quads,
-                            &probs,
-                            &mesh.quads,
-                            &covering,
-                            cfg.threshold,
-                            sp.tau,
-                        );
-                        learned_noise(&x)
-                    } else {
-                        covered_unused_by(&mesh.vertices, u, &mesh.quads, &covering, sp.tau)
-                    }
+                SecondPassCover::Believed => {
+                    covered_unused_by(&mesh.vertices, u, &mesh.quads, &believed_in(&mesh, faces), sp.tau)
                 }
+                SecondPassCover::Learned => learned_noise(&first_pass_point_features(
+                    &local,
+                    &mesh,
+                    u,
+                    (&quads, &probs),
+                    faces,
+                    cfg.threshold,
+                    sp.tau,
+                )),
             };
             let kept: Vec<u32> = (0..u as u32).filter(|&i| !noise[i as usize]).collect();
             if kept.len() < u && kept.len() >= 4 {
@@ -420,21 +410,30 @@ pub fn first_pass_features(
     let local64: Vec<[f64; 3]> = prep.uniq.iter().map(|&p| prep.frame.to_local_f64(p)).collect();
     let (mesh, _) =
         postprocess_with_reserve(&local64, &faces, &face_probs, &reserve, &reserve_probs, &cfg.postprocess)?;
-    let believed: std::collections::HashSet<[u32; 4]> = faces.iter().map(|&q| corner_set(q)).collect();
-    let covering: Vec<[u32; 4]> =
-        mesh.quads.iter().copied().filter(|&q| believed.contains(&corner_set(q))).collect();
-    let x = point_features(
-        &prep.local,
-        &mesh.vertices,
-        u,
-        &quads,
-        &probs,
-        &mesh.quads,
-        &covering,
-        cfg.threshold,
-        tau,
-    );
+    let x = first_pass_point_features(&prep.local, &mesh, u, (&quads, &probs), &faces, cfg.threshold, tau);
     Ok(prep.distinct.iter().copied().zip(x).collect())
+}
+
+/// The faces of `mesh` the classifier predicted real: those whose vertex set is one of
+/// `faces` (the candidates above the threshold).
+fn believed_in(mesh: &QuadMesh, faces: &[[u32; 4]]) -> Vec<[u32; 4]> {
+    let believed: std::collections::HashSet<[u32; 4]> = faces.iter().map(|&q| corner_set(q)).collect();
+    mesh.quads.iter().copied().filter(|&q| believed.contains(&corner_set(q))).collect()
+}
+
+/// [`point_features`] of the first pass: its finished `mesh` (in the normalised frame),
+/// its scored candidates, and `faces`, those above the threshold.
+fn first_pass_point_features(
+    local: &[[f32; 3]],
+    mesh: &QuadMesh,
+    u: usize,
+    (quads, probs): (&[[u32; 4]], &[f32]),
+    faces: &[[u32; 4]],
+    threshold: f32,
+    tau: f64,
+) -> Vec<[f32; crate::pipeline::second_pass::NOISE_FEATURES]> {
+    let covering = believed_in(mesh, faces);
+    point_features(local, &mesh.vertices, u, quads, probs, &mesh.quads, &covering, threshold, tau)
 }
 
 /// Candidates of a normalised cloud and their probabilities (the members' mean):

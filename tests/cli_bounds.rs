@@ -192,6 +192,8 @@ fn small_cloud_rounds_is_checked_and_limits_small_clouds() {
     assert_eq!(run("a.obj", &["--small-cloud-rounds", &small]), none);
     assert_eq!(run("c.obj", &["--small-cloud-rounds", &not_small]), all);
     assert_eq!(run("e.obj", &["--small-cloud-rounds", &format!("{},2", n + 1)]), two);
+    // `off` lifts the limit (the default's 200 points do not reach this cloud).
+    assert_eq!(run("g.obj", &["--small-cloud-rounds", "off"]), all);
 }
 
 /// `reconstruct --per-point` (session 23) sizes the candidate budget as `candidates`

@@ -1488,14 +1488,14 @@ mod tests {
     }
 
     /// The shipped weights (the `default` preset reading normals without their signs,
-    /// plus 5 refinement rounds of widths 32, 32 reading sides by normals and the flow
+    /// plus 6 refinement rounds of widths 32, 32 reading sides by normals and the flow
     /// columns) load, and re-serialise to the very same bytes.
     #[test]
     fn shipped_weights_load_and_reserialise_bit_exactly() {
         let bytes = include_bytes!("../../fixtures/point2quad-default.p2qm");
         let m = Model::from_bytes(bytes, Path::new("fixture")).unwrap();
         let want = ModelConfig {
-            refine_rounds: 5,
+            refine_rounds: 6,
             refine_widths: vec![32, 32],
             refine_sides: SideRule::Normals,
             refine_input: RefineInput::Flow,

@@ -60,7 +60,8 @@ pub struct ReconstructConfig {
     /// ([`crate::pipeline::refine::Refiner::apply_first`]).
     pub max_rounds: Option<usize>,
     /// Clouds of fewer points than this run at most [`ReconstructConfig::small_cloud_rounds`]
-    /// refinement rounds (session 34; 0, the default, never applies). The rounds
+    /// refinement rounds (session 34; default 200 and 5: the shipped weights' sixth
+    /// round runs on clouds of 200 points or more; 0 never applies). The rounds
     /// learn from the training clouds, the smallest of which has 238 points: a
     /// late round may then read a tiny cloud, most of whose faces are on its border,
     /// as it never saw one. Counted over the cloud each pass scores (distinct points,
@@ -109,7 +110,7 @@ pub enum SecondPassCover {
     Believed,
     /// A learned test over 16 values per point, the [`SecondPassCover::Believed`] rule's
     /// among them ([`crate::pipeline::second_pass::point_features`],
-    /// [`crate::pipeline::second_pass::learned_noise`]; session 35, off by default).
+    /// [`crate::pipeline::second_pass::learned_noise`]; the default since session 35).
     Learned,
 }
 
@@ -134,12 +135,12 @@ impl Default for ReconstructConfig {
             second_pass: Some(SecondPass {
                 tau: 0.25,
                 mode: SecondPassMode::Average,
-                cover: SecondPassCover::Believed,
+                cover: SecondPassCover::Learned,
             }),
             watertight: None,
             max_rounds: None,
-            small_cloud_points: 0,
-            small_cloud_rounds: usize::MAX,
+            small_cloud_points: 200,
+            small_cloud_rounds: 5,
         }
     }
 }
@@ -971,6 +972,16 @@ mod tests {
     use super::*;
     use crate::mesh::shapes;
     use crate::pipeline::model::ModelConfig;
+
+    /// The defaults session 35 shipped: the sixth round stays off clouds under 200
+    /// points, and the second pass's noise points are the learned test's.
+    #[test]
+    fn the_defaults_gate_the_sixth_round_and_learn_the_noise() {
+        let cfg = ReconstructConfig::default();
+        assert_eq!(cfg.rounds_for(199), Some(5));
+        assert_eq!(cfg.rounds_for(200), None);
+        assert_eq!(cfg.second_pass.map(|s| s.cover), Some(SecondPassCover::Learned));
+    }
 
     /// The merge of the two passes, against its definition written out per case.
     #[test]

@@ -50,10 +50,12 @@ OPTIONS:
     --svg PREVIEW.svg     also write a shaded SVG picture of the result
     --rounds N            run at most the first N of the model's refinement rounds,
                           0 to 8: the probabilities the model refined with N rounds
-                          gives (default: all; the shipped weights have 5)
+                          gives (default: all; the shipped weights have 6)
     --small-cloud-rounds P,N
                           clouds of fewer than P distinct points run at most N
-                          refinement rounds (session 34; default: no such limit)
+                          refinement rounds; `off`: no such limit (session 34: the
+                          shipped weights' sixth round stays off clouds smaller than
+                          any it was trained on) [200,5]
     --progress            name each stage on stderr as it ends, with its time
                           (default: for clouds of 50,000 points or more)
     --no-postprocess      write the faces the network predicts, unrepaired
@@ -116,7 +118,7 @@ OPTIONS:
                           those the classifier predicted real, `all` every face of the
                           first pass's mesh (rescued, filled and closing quads too),
                           `learned` a learned test over 16 values per point, the
-                          `believed` rule's among them (session 35) [believed]
+                          `believed` rule's among them (session 35) [learned]
     --watertight          close every hole at the end, at the price of faces that are
                           not the classifier's: each odd loop is paired with another
                           by splitting the strip of least believed faces between them
@@ -199,11 +201,13 @@ fn parse_rounds(a: &Args, cmd: &str, cfg: &mut ReconstructConfig) -> Result<()> 
         cfg.max_rounds =
             Some(a.parsed_in(cmd, "--rounds", 0usize, 0, MAX, "a model has at most that many")?);
     }
-    if let Some(v) = a.value("--small-cloud-rounds") {
+    if a.value("--small-cloud-rounds") == Some("off") {
+        cfg.small_cloud_points = 0;
+    } else if let Some(v) = a.value("--small-cloud-rounds") {
         let bad = || {
             Error::Usage(format!(
                 "{cmd}: --small-cloud-rounds {}: expected P,N (fewer than P points run at most N \
-                 rounds; P at least 1, N 0 to {MAX}; see `point2quad {cmd} --help`)",
+                 rounds; P at least 1, N 0 to {MAX}) or off; see `point2quad {cmd} --help`)",
                 v.escape_debug()
             ))
         };
@@ -352,9 +356,9 @@ pub fn run(argv: &[String]) -> Result<()> {
             let tau =
                 a.parsed_in(cmd, "--second-pass-tau", 0.25f64, 0.0, 10.0, "a share of a face's edge length")?;
             let cover = match a.value("--second-pass-cover") {
-                None | Some("believed") => SecondPassCover::Believed,
+                Some("believed") => SecondPassCover::Believed,
                 Some("all") => SecondPassCover::All,
-                Some("learned") => SecondPassCover::Learned,
+                None | Some("learned") => SecondPassCover::Learned,
                 Some(c) => {
                     return Err(Error::Usage(format!(
                     "{cmd}: --second-pass-cover {}: expected believed, all or learned (see `point2quad {cmd} --help`)",

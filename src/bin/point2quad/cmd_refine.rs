@@ -36,7 +36,7 @@ OPTIONS:
     --data DIR            dataset folder (required)
     --model BASE          trained weights (required)
     --out MODEL           output weights (required)
-    --rounds N            refinement rounds, 1..8 (the shipped weights: 5) [5]
+    --rounds N            refinement rounds, 1..8 (the shipped weights: 6) [6]
     --widths W,W          hidden widths of each round's MLP [32,32]
     --epochs N            passes over the training candidates per round, 1..1000 [4]
     --batch B             candidates per step, 1..1000000 [4096]
@@ -126,7 +126,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     let data = PathBuf::from(a.required(cmd, "--data")?);
     let base_path = PathBuf::from(a.required(cmd, "--model")?);
     let out = PathBuf::from(a.required(cmd, "--out")?);
-    let rounds = a.parsed_in(cmd, "--rounds", 5usize, 1, MAX_REFINE_ROUNDS, "refinement rounds")?;
+    let rounds = a.parsed_in(cmd, "--rounds", 6usize, 1, MAX_REFINE_ROUNDS, "refinement rounds")?;
     let widths = parse_widths(a.value("--widths").unwrap_or("32,32"))?;
     let sides_name = a.value("--sides").unwrap_or("normals");
     let sides = SideRule::from_name(sides_name).ok_or_else(|| {

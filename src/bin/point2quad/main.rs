@@ -41,7 +41,7 @@ COMMANDS:
     eval         PRED --gt GT [--json]     mesh quality and accuracy metrics
     dataset      --out DIR [--synthetic N] [--meshes DIR] [--noise 0.1] [--seed S]
     train        --data DIR --out MODEL [--config default|default_kp|paper] [--epochs N] [--resume CKPT]
-    refine       --data DIR --model BASE --out MODEL [--rounds 5]   train refinement rounds
+    refine       --data DIR --model BASE --out MODEL [--rounds 6]   train refinement rounds
     repair       MESH -o OUT.{obj,ply,off} post-process and hole-fill a quad mesh or face soup
     render       MESH -o OUT.svg           shaded SVG picture of a mesh
     synth        -o CLOUD.xyz [--gt GT.obj] synthetic noisy cloud + ground-truth quad mesh

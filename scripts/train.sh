@@ -11,8 +11,8 @@
 # such a run writes out/train/{model,refined}_holdout_<names>.p2qm and leaves fixtures/ alone.
 # Resumes from out/train/model.p2qm.ckpt if a run was interrupted (the checkpoint records
 # the run's options and data: one of other data is refused; delete it to start afresh).
-# Then 6 refinement rounds (`point2quad refine`, seed 0, about 10 minutes; 5 before
-# session 34) on the same data over the trained classifier; the refined weights are the
+# Then 6 refinement rounds (`point2quad refine`, seed 0, about 12 minutes; 5 before
+# session 35) on the same data over the trained classifier; the refined weights are the
 # shipped ones.
 # Since session 22 the dataset holds three noise draws of each sample
 # (`--noise-variants 3`; the first draws are byte for byte the dataset without them):

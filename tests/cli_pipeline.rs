@@ -726,12 +726,12 @@ fn reconstruct_second_pass_option() {
     let one = s.p("one.obj");
     let out = ok(&["reconstruct", &cloud, "-o", &one, "--second-pass", "off"]);
     assert!(!String::from_utf8_lossy(&out.stderr).contains("second pass"));
-    // The default is `average`, tau 0.25, the believed faces covering.
+    // The default is `average`, tau 0.25, the learned test (session 35).
     let (dflt, avg) = (s.p("default.obj"), s.p("avg.obj"));
     let out = ok(&["reconstruct", &cloud, "-o", &dflt]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("second pass:"));
     let explicit =
-        ["--second-pass", "average", "--second-pass-tau", "0.25", "--second-pass-cover", "believed"];
+        ["--second-pass", "average", "--second-pass-tau", "0.25", "--second-pass-cover", "learned"];
     ok(&[&["reconstruct", &cloud, "-o", &avg][..], &explicit].concat());
     assert_eq!(std::fs::read(&dflt).unwrap(), std::fs::read(&avg).unwrap());
     let never = s.p("never.obj");

@@ -275,7 +275,7 @@ const SPAN_MIN_PROB: f32 = 0.05;
 /// | 2 | 1 when no face uses it and any face holds it |
 /// | 3, 4, 5 | the largest probability of the candidates it is a corner of, their sum / 4, their count / 10 |
 /// | 6, 7 | how many faces of the mesh, and how many believed faces, use it, / 4 |
-/// | 8, 9 | 1 when a candidate above `threshold`, above 0.9, holds it (its corners included) |
+/// | 8, 9 | 1 when a candidate above `threshold`, above 0.9, holds it (a candidate's own corners lie on its boundary, where the test may go either way) |
 /// | 10, 11 | the distance to its nearest and second-nearest other point over the mean distance of its 9 nearest |
 /// | 12 | the mean probability of the candidates it is a corner of (0 for none) |
 /// | 13 | the largest probability (at least 0.05) of a candidate holding it strictly inside (not as a corner) |

@@ -402,7 +402,8 @@ fn the_second_pass_drops_the_points_inside_faces_and_keeps_the_mesh_valid() {
                 assert!(q.iter().all(|&v| !expect[v as usize]), "{mode:?}: face {q:?} uses a dropped point");
             }
         } else {
-            // Only the believed faces cover: never more points than all faces do.
+            // Only the believed faces cover (learned: a test whose rule column is
+            // theirs): on this grid never more points than all faces hold.
             let d = rep.second_pass_dropped.expect("the pass ran");
             assert!(d >= 1 && d <= all, "{d} of {all}");
         }
@@ -508,6 +509,9 @@ fn first_pass_features_are_what_the_learned_second_pass_reads() {
     assert!(noise >= 1, "the test finds the grid's noise points");
     let (_, rep) = reconstruct_with_report(&pts, shipped(), &cfg).expect("reconstruct");
     assert_eq!(rep.second_pass_dropped, Some(noise));
-    let off = ReconstructConfig { run_postprocess: false, ..cfg };
+    let off = ReconstructConfig { run_postprocess: false, ..cfg.clone() };
     assert!(first_pass_features(&pts, shipped(), &off).is_err());
+    // The settings `reconstruct` refuses are refused here too.
+    let bad = ReconstructConfig { threshold: f32::NAN, ..cfg };
+    assert!(first_pass_features(&pts, shipped(), &bad).is_err());
 }

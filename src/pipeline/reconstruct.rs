@@ -265,16 +265,7 @@ pub fn reconstruct_observed(
     if models.is_empty() {
         return Err(Error::invalid("an ensemble needs at least one model"));
     }
-    if !(cfg.threshold >= 0.0 && cfg.threshold < 1.0) {
-        return Err(Error::invalid(format!("threshold {} must be in [0, 1)", cfg.threshold)));
-    }
-    if let Some(sp) = &cfg.second_pass {
-        if !(sp.tau >= 0.0 && sp.tau.is_finite()) {
-            return Err(Error::invalid(format!("second pass: tau {} must be finite and at least 0", sp.tau)));
-        }
-    }
-    // Before any work on the cloud (the merge share is checked by `prepare_cloud`).
-    crate::pipeline::candidates::check_neighbour_counts(&cfg.candidates)?;
+    check_config(cfg)?;
     let mut report = ReconstructReport { points: points.len(), ..Default::default() };
     let mut clock = Clock::new(observer);
     let prep = prepare_cloud(points, cfg.merge_share)?;
@@ -390,7 +381,8 @@ pub fn reconstruct_observed(
 /// without one). For fitting the test (`examples/noise_test_fit.rs`).
 ///
 /// # Errors
-/// As [`reconstruct`], and `InvalidInput` when `cfg.run_postprocess` is false.
+/// As [`reconstruct`] (the same settings refused), and `InvalidInput` when
+/// `cfg.run_postprocess` is false.
 pub fn first_pass_features(
     points: &[[f64; 3]],
     model: &Model,
@@ -399,7 +391,7 @@ pub fn first_pass_features(
     if !cfg.run_postprocess {
         return Err(Error::invalid("the first pass's features need the post-process"));
     }
-    crate::pipeline::candidates::check_neighbour_counts(&cfg.candidates)?;
+    check_config(cfg)?;
     let tau = cfg.second_pass.map_or(0.25, |sp| sp.tau);
     let prep = prepare_cloud(points, cfg.merge_share)?;
     let mut quiet = |_: StageDone| {};
@@ -413,6 +405,21 @@ pub fn first_pass_features(
         postprocess_with_reserve(&local64, &faces, &face_probs, &reserve, &reserve_probs, &cfg.postprocess)?;
     let x = first_pass_point_features(&prep.local, &mesh, u, (&quads, &probs), &faces, cfg.threshold, tau);
     Ok(prep.distinct.iter().copied().zip(x).collect())
+}
+
+/// The settings [`reconstruct`] refuses before any work on the cloud (the merge share is
+/// checked by [`prepare_cloud`]): a threshold outside [0, 1), a second pass's `tau` that
+/// is negative or not finite, neighbour counts out of range.
+fn check_config(cfg: &ReconstructConfig) -> Result<()> {
+    if !(cfg.threshold >= 0.0 && cfg.threshold < 1.0) {
+        return Err(Error::invalid(format!("threshold {} must be in [0, 1)", cfg.threshold)));
+    }
+    if let Some(sp) = &cfg.second_pass {
+        if !(sp.tau >= 0.0 && sp.tau.is_finite()) {
+            return Err(Error::invalid(format!("second pass: tau {} must be finite and at least 0", sp.tau)));
+        }
+    }
+    crate::pipeline::candidates::check_neighbour_counts(&cfg.candidates)
 }
 
 /// The faces of `mesh` the classifier predicted real: those whose vertex set is one of

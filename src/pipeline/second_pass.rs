@@ -322,8 +322,10 @@ pub fn point_features(
         d
     };
     let (mesh_degree, believed_degree) = (degree(mesh_quads), degree(believed_mesh));
-    let knn = crate::pipeline::candidates::knn_table(&local[..u], 9);
+    // One tree for the neighbour columns and the "strictly inside" searches; the rows
+    // are `candidates::knn_table(&local[..u], 9)`'s (the point itself, then 9 others).
     let tree = crate::spatial::kdtree::KdTree::build(&local[..u]);
+    let knn = tree.knn_batch(&local[..u], 9.min(u.saturating_sub(1)) + 1);
     let span = strictly_inside(&tree, positions, u, cands, probs, tau);
     let span_mesh = strictly_inside(&tree, positions, u, mesh_quads, &vec![1.0; mesh_quads.len()], tau);
     (0..u)

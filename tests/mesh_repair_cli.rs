@@ -3,6 +3,8 @@
 
 #[path = "common/halfedge.rs"]
 mod common;
+#[path = "common/scratch.rs"]
+mod scratch;
 
 use std::process::Command;
 
@@ -17,23 +19,18 @@ fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_point2quad"))
 }
 
-fn tmp(name: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("p2q_repair_{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d.join(name)
-}
-
 #[test]
 fn repair_turns_a_soup_into_a_valid_mesh() {
+    let s = scratch::Scratch::new("repair");
     let m = from_shape("cube_sphere", point2quad::mesh::shapes::cube_sphere(4));
     let mut rng = Rng::new(3);
     let (faces, _) = random_soup(&m, &mut rng, 0.05, 30);
     let mut poly =
         PolyMesh { vertices: m.positions.clone(), faces: faces.iter().map(|f| f.to_vec()).collect() };
     poly.faces.push(vec![0, 1, 2]);
-    let input = tmp("soup.obj");
+    let input = s.path("soup.obj");
     write_mesh(&input, &poly).unwrap();
-    let out = tmp("out.ply");
+    let out = s.path("out.ply");
 
     let r = bin().args(["repair", input.to_str().unwrap(), "-o", out.to_str().unwrap()]).output().unwrap();
     assert!(!r.status.success());
@@ -58,6 +55,7 @@ fn repair_turns_a_soup_into_a_valid_mesh() {
 
 #[test]
 fn repair_usage_errors() {
+    let s = scratch::Scratch::new("repair");
     let r = bin().args(["repair", "--help"]).output().unwrap();
     assert!(r.status.success());
     assert!(String::from_utf8_lossy(&r.stdout).contains("--drop-non-quads"));
@@ -65,8 +63,10 @@ fn repair_usage_errors() {
     assert_eq!(r.status.code(), Some(2));
     let r = bin().args(["repair", "x.obj", "-o", "y.obj", "--priority", "bogus"]).output().unwrap();
     assert_eq!(r.status.code(), Some(2));
-    let r =
-        bin().args(["repair", "/nonexistent/x.obj", "-o", tmp("y.obj").to_str().unwrap()]).output().unwrap();
+    let r = bin()
+        .args(["repair", "/nonexistent/x.obj", "-o", s.path("y.obj").to_str().unwrap()])
+        .output()
+        .unwrap();
     assert_eq!(r.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&r.stderr).contains("/nonexistent/x.obj"));
 }
@@ -78,6 +78,7 @@ fn repair_usage_errors() {
 /// output has no degenerate quad by the metrics' own count.
 #[test]
 fn repair_drops_zero_area_quads_and_counts_them() {
+    let s = scratch::Scratch::new("repair");
     use point2quad::mesh::quality::{is_degenerate_quad, mesh_metrics};
     let g = point2quad::mesh::shapes::grid(4, 3, 4.0, 3.0);
     let mut poly = PolyMesh::from(&g);
@@ -88,9 +89,9 @@ fn repair_drops_zero_area_quads_and_counts_them() {
     for k in 0..3 {
         poly.faces.push((0..4).map(|i| n + 4 * k + i).collect());
     }
-    let input = tmp("zero_area.obj");
+    let input = s.path("zero_area.obj");
     write_mesh(&input, &poly).unwrap();
-    let out = tmp("zero_area_out.obj");
+    let out = s.path("zero_area_out.obj");
     let r = bin().args(["repair", input.to_str().unwrap(), "-o", out.to_str().unwrap()]).output().unwrap();
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(r.status.success(), "{err}");
@@ -109,6 +110,7 @@ fn repair_drops_zero_area_quads_and_counts_them() {
 /// true pair; `--no-close` leaves them open; a small separate part stays.
 #[test]
 fn repair_pairs_odd_holes_unless_told_not_to() {
+    let s = scratch::Scratch::new("repair");
     let g = point2quad::mesh::shapes::grid(4, 3, 4.0, 3.0);
     let id = |i: u32, j: u32| j * 5 + i;
     let (a, b, c, d, e, f) = (id(1, 1), id(2, 1), id(3, 1), id(3, 2), id(2, 2), id(1, 2));
@@ -127,10 +129,10 @@ fn repair_pairs_odd_holes_unless_told_not_to() {
     let n = poly.vertices.len() as u32;
     poly.vertices.extend([[10.0, 0.0, 0.0], [11.0, 0.0, 0.0], [11.0, 1.0, 0.0], [10.0, 1.0, 0.0]]);
     poly.faces.push(vec![n, n + 1, n + 2, n + 3]);
-    let input = tmp("diag.obj");
+    let input = s.path("diag.obj");
     write_mesh(&input, &poly).unwrap();
     let faces_of = |extra: &[&str]| {
-        let out = tmp("diag_out.obj");
+        let out = s.path("diag_out.obj");
         let mut args = vec!["repair", input.to_str().unwrap(), "-o", out.to_str().unwrap()];
         args.extend_from_slice(extra);
         let r = bin().args(&args).output().unwrap();

@@ -289,7 +289,8 @@ proptest! {
     ) {
         let cloud: Vec<[f64; 3]> = cloud.iter().map(|p| [p[0], p[1] * stretch, p[2]]).collect();
         let pts = to_f32(&cloud);
-        let base = CandidateConfig { k: 8, ..CandidateConfig::default() };
+        // No floor: these sheets are smaller than the default's 200 points.
+        let base = CandidateConfig { k: 8, far_min_points: 0, ..CandidateConfig::default() };
         let cfg = CandidateConfig { far_per_point: far, ..base.clone() };
         let (c0, c1) = (generate(&pts, &base).unwrap(), generate(&pts, &cfg).unwrap());
         let added = check_only_adds(&pts, &cfg, &c0, &c1)?;
@@ -341,6 +342,27 @@ fn far_completion_reaches_cells_beyond_the_k_nearest() {
     );
 }
 
+/// The far completion's floor (session 36): on the 720-point lattice above it adds
+/// quads when the floor is the cloud's size and nothing at all (the candidates equal
+/// those without it, rank and score included) when the floor is one point more.
+#[test]
+fn far_completion_stays_off_clouds_under_its_floor() {
+    let pts = to_f32(&rows_lattice(60, 12, 5.0));
+    let base = CandidateConfig { k: 8, continue_rank: 0, ..CandidateConfig::default() };
+    let off = generate(&pts, &base).unwrap();
+    let with = |floor: usize| {
+        generate(&pts, &CandidateConfig { far_per_point: 4, far_min_points: floor, ..base.clone() }).unwrap()
+    };
+    let (at, above) = (with(pts.len()), with(pts.len() + 1));
+    assert!(at.quads.len() > off.quads.len(), "nothing added at the floor");
+    assert_eq!(above.quads, off.quads);
+    assert_eq!(above.rank, off.rank);
+    assert_eq!(
+        above.score.iter().map(|s| s.to_bits()).collect::<Vec<_>>(),
+        off.score.iter().map(|s| s.to_bits()).collect::<Vec<_>>()
+    );
+}
+
 /// The far completion on degenerate clouds an embedder may pass straight to the
 /// library (no input hygiene): every point the same, every point twice, a line, a
 /// plane grid with a far outlier, two distant clusters. No panic; what it returns
@@ -362,7 +384,8 @@ fn far_completion_on_degenerate_clouds() {
         ("clusters", clusters),
     ];
     for (name, pts) in clouds {
-        let cfg = CandidateConfig { far_per_point: 8, ..CandidateConfig::default() };
+        // No floor: these clouds are smaller than the default's 200 points.
+        let cfg = CandidateConfig { far_per_point: 8, far_min_points: 0, ..CandidateConfig::default() };
         let c = generate(&pts, &cfg).unwrap_or_else(|e| panic!("{name}: {e}"));
         let mut keys: Vec<[u32; 4]> = c.quads.iter().map(key).collect();
         assert!(keys.iter().all(|k| k.windows(2).all(|w| w[0] != w[1])), "{name}: a repeated corner");

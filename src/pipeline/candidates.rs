@@ -121,6 +121,12 @@ pub struct CandidateConfig {
     /// Neighbours (the point itself not counted) scanned for a point's
     /// direction-diverse neighbours by the far completion.
     pub far_k: usize,
+    /// The far completion runs only on clouds of at least this many (distinct) points
+    /// (session 36). On a smaller cloud "beyond the `k` nearest" is the far side of the
+    /// whole shape: session 29 saw it join the rims of a 24-point trough like a lid and
+    /// lose 8- to 32-point cubes and tori. 200, the clouds the shipped weights keep from
+    /// their sixth round (`ReconstructConfig::small_cloud_points`).
+    pub far_min_points: usize,
 }
 
 impl Default for CandidateConfig {
@@ -145,6 +151,7 @@ impl Default for CandidateConfig {
             continue_steps: 3,
             far_per_point: 0,
             far_k: 64,
+            far_min_points: 200,
         }
     }
 }
@@ -1317,7 +1324,7 @@ type FarEntry = ([u32; 4], [u32; 4], f32, u16);
 fn far_completion(cloud: &Cloud<'_>, quads: &[[u32; 4]]) -> Vec<([u32; 4], f32, u16)> {
     let (points, cfg) = (cloud.points, cloud.cfg);
     let n = points.len();
-    if cfg.far_per_point == 0 || n < 4 {
+    if cfg.far_per_point == 0 || n < cfg.far_min_points.max(4) {
         return Vec::new();
     }
     let far = knn_table(points, cfg.far_k);
@@ -1880,7 +1887,7 @@ mod tests {
                 pts.extend(copies);
             }
             for per in [1usize, 3, 8] {
-                let base = CandidateConfig { far_k, ..CandidateConfig::default() };
+                let base = CandidateConfig { far_k, far_min_points: 0, ..CandidateConfig::default() };
                 let cfg = CandidateConfig { far_per_point: per, ..base.clone() };
                 let c0 = generate(&pts, &base).unwrap();
                 let cloud = Cloud {

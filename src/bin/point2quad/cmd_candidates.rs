@@ -31,7 +31,8 @@ OPTIONS:
     --far F          far completion: each point also keeps its F best quads with a
                      corner beyond its k nearest, completed as parallelograms
                      towards its direction-diverse neighbours (anisotropic faces;
-                     default 0, off, as `reconstruct`; 0 to 64)
+                     clouds of 200+ distinct points only; default 0, off, as
+                     `reconstruct`; 0 to 64)
     -h, --help       this text
 
 The input is cleaned as `reconstruct` cleans it: exact and near-duplicate points

@@ -68,8 +68,9 @@ OPTIONS:
                           propose the quads across their sides, snapped to the
                           nearest points (0 turns it off) [2]
     --far F               far completion: each point also keeps its F best quads
-                          with a corner beyond its k nearest (anisotropic faces),
-                          0 to 64; the shipped weights were trained with 0 [0]
+                          with a corner beyond its k nearest (anisotropic faces;
+                          clouds of 200+ distinct points only), 0 to 64; the
+                          shipped weights were trained with 0 [0]
     --max-floater-faces N remove open components of at most N faces after insertion
                           (floaters; 0 keeps them) [4]
     --rescue-min-prob P   at holes, candidates scored under the threshold but at least P

@@ -121,8 +121,9 @@ pub struct CandidateConfig {
     /// Neighbours (the point itself not counted) scanned for a point's
     /// direction-diverse neighbours by the far completion.
     pub far_k: usize,
-    /// The far completion runs only on clouds of at least this many (distinct) points
-    /// (session 36). On a smaller cloud "beyond the `k` nearest" is the far side of the
+    /// The far completion runs only on clouds of at least this many points (session
+    /// 36): the points [`generate`] is given, which `reconstruct` and the CLI make the
+    /// distinct ones. On a smaller cloud "beyond the `k` nearest" is the far side of the
     /// whole shape: session 29 saw it join the rims of a 24-point trough like a lid and
     /// lose 8- to 32-point cubes and tori. 200, the clouds the shipped weights keep from
     /// their sixth round (`ReconstructConfig::small_cloud_points`).

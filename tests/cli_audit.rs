@@ -142,6 +142,7 @@ fn degenerate_clouds_are_named() {
     let err = assert_ok(&p2q(&["reconstruct", &line, "-o", &out]), "line");
     assert!(err.contains("warning: no faces") && err.contains(&line), "{err}");
     assert!(!err.contains("can alone explain it"), "defaults blamed: {err}");
+    assert!(!err.contains("most probable candidate"), "a hint without candidates: {err}");
     assert!(faces(&out).is_empty());
     // With candidate options off their defaults the warning names them (session 24's
     // audit: `--per-point 64` or `--k 3` alone gave no faces and the input was blamed).
@@ -152,6 +153,35 @@ fn degenerate_clouds_are_named() {
             && err.contains("can alone explain it"),
         "{err}"
     );
+}
+
+/// When no candidate is predicted real but some exist, the no-faces warning names the
+/// best one's probability (session 36): on the 8 corners of a cube the shipped weights
+/// hesitate everywhere (its 6 faces score 0.1–0.5). The figure is the real maximum: a
+/// `--threshold` 0.002 under it keeps at least one candidate, 0.002 over it none.
+#[test]
+fn the_no_faces_warning_names_the_best_candidate() {
+    let dir = Scratch::new("best_hint");
+    let corners: Vec<[f64; 3]> =
+        (0..8).map(|i| [(i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64]).collect();
+    let cube = dir.write("cube.xyz", &xyz(&corners));
+    let out = dir.p("cube.obj");
+    let err = assert_ok(&p2q(&["reconstruct", &cube, "-o", &out]), "cube");
+    let key = "the most probable candidate scored ";
+    let at = err.find(key).unwrap_or_else(|| panic!("no best-candidate hint: {err}")) + key.len();
+    let best: f64 = err[at..at + 5].parse().unwrap_or_else(|e| panic!("{e}: {err}"));
+    assert!(best > 0.0 && best <= 0.5, "{best}");
+    let predicted = |t: f64| -> usize {
+        let t = format!("{t:.4}");
+        let e = assert_ok(
+            &p2q(&["reconstruct", &cube, "-o", &out, "--no-postprocess", "--threshold", &t]),
+            "cube",
+        );
+        let i = e.find(" predicted real").unwrap_or_else(|| panic!("no summary: {e}"));
+        e[..i].rsplit(' ').next().unwrap().parse().unwrap()
+    };
+    assert!(predicted(best - 0.002) >= 1, "nothing above {best} - 0.002");
+    assert_eq!(predicted(best + 0.002), 0, "something above {best} + 0.002");
 }
 
 /// Regression: a missing output folder was found only when writing, after the work

@@ -154,6 +154,10 @@ pub struct ReconstructReport {
     pub candidates: usize,
     /// Candidates predicted real (probability above the threshold).
     pub predicted: usize,
+    /// The highest probability among the candidates whose count is `predicted` (the
+    /// merged ones after a second pass); `None` when there is no candidate. When nothing
+    /// is predicted real it says how far below the threshold the cloud's best quad is.
+    pub best_probability: Option<f32>,
     /// The post-process's account (absent with `run_postprocess = false`).
     pub postprocess: Option<PostprocessReport>,
     /// Faces in the output.
@@ -279,6 +283,7 @@ pub fn reconstruct_observed(
     let (quads, probs) = score_cloud(&local, models, cfg, &mut clock, &mut report)?;
     let (faces, face_probs, reserve, reserve_probs) = split_at_threshold(&quads, &probs, cfg.threshold);
     report.predicted = faces.len();
+    report.best_probability = best_of(&probs);
     // Index `i` of the distinct points (or, past them, of a vertex hole filling added)
     // → index in the output, whose vertices are the input points, then the added ones.
     let (n, u) = (points.len(), uniq.len());
@@ -337,6 +342,7 @@ pub fn reconstruct_observed(
                     let (quads, probs) = merge_passes(&quads, &probs, &noise, &q2, &p2, sp.mode);
                     let second = split_at_threshold(&quads, &probs, cfg.threshold);
                     report.predicted = second.0.len();
+                    report.best_probability = best_of(&probs);
                     report.second_pass_dropped = Some(u - kept.len());
                     last = Some("second postprocess");
                     (mesh, pp) = post(&second)?;
@@ -420,6 +426,11 @@ fn check_config(cfg: &ReconstructConfig) -> Result<()> {
         }
     }
     crate::pipeline::candidates::check_neighbour_counts(&cfg.candidates)
+}
+
+/// The highest of `probs` (`None` when empty).
+fn best_of(probs: &[f32]) -> Option<f32> {
+    probs.iter().copied().reduce(f32::max)
 }
 
 /// The faces of `mesh` the classifier predicted real: those whose vertex set is one of

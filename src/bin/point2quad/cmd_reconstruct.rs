@@ -501,10 +501,11 @@ pub fn run(argv: &[String]) -> Result<()> {
     if rep.faces == 0 {
         crate::output::stderr(&format!(
             "reconstruct: warning: no faces: {} holds no surface the model recognises \
-             ({} candidates, {} predicted real); the output has the points only{}\n",
+             ({} candidates, {} predicted real{}); the output has the points only{}\n",
             input.display(),
             rep.candidates,
             rep.predicted,
+            best_hint(rep.predicted, rep.best_probability, cfg.threshold),
             off_default_candidates(&cfg.candidates)
         ));
     }
@@ -541,6 +542,20 @@ pub fn run(argv: &[String]) -> Result<()> {
         }
     ));
     Ok(())
+}
+
+/// For the no-faces warning: when nothing was predicted real but candidates exist, the
+/// best candidate's probability and the `--threshold` that would keep it (tiny or odd
+/// clouds, where the model hesitates everywhere: an 8-point cube's 6 faces score
+/// 0.1–0.5). Empty otherwise.
+fn best_hint(predicted: usize, best: Option<f32>, threshold: f32) -> String {
+    match best {
+        Some(p) if predicted == 0 && p <= threshold => format!(
+            "; the most probable candidate scored {p:.3}: `--threshold` below that keeps the \
+             candidates above it"
+        ),
+        _ => String::new(),
+    }
 }
 
 /// When `--k`, `--per-point` or `--far` differ from the defaults the shipped weights were

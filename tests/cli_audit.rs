@@ -157,7 +157,7 @@ fn degenerate_clouds_are_named() {
 
 /// When no candidate is predicted real but some exist, the no-faces warning names the
 /// best one's probability (session 36): on the 8 corners of a cube the shipped weights
-/// hesitate everywhere (its 6 faces score 0.1–0.5). The figure is the real maximum: a
+/// hesitate everywhere (its 6 candidates score 0.1–0.5). The figure is the real maximum: a
 /// `--threshold` 0.002 under it keeps at least one candidate, 0.002 over it none.
 #[test]
 fn the_no_faces_warning_names_the_best_candidate() {

@@ -4,12 +4,15 @@
 
 #[path = "common/quality.rs"]
 mod quality_common;
+#[path = "common/scratch.rs"]
+mod scratch;
 
 use std::process::{Command, Output};
 
 use point2quad::mesh::poly::PolyMesh;
 use point2quad::mesh::quality::{compare, mesh_metrics};
-use quality_common::{check_xml, grid, parse_json, temp_dir, torus, write_obj, Json};
+use quality_common::{check_xml, grid, parse_json, torus, write_obj, Json};
+use scratch::Scratch;
 
 fn p2q(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_point2quad")).args(args).output().expect("test: run the binary")
@@ -42,14 +45,14 @@ fn num(j: &Json, k: &str) -> f64 {
 
 #[test]
 fn eval_json_agrees_with_the_library() {
-    let dir = temp_dir("eval_json");
+    let dir = Scratch::new("quality_eval_json");
     let mut m = torus(16, 8, 0.4);
     // Perturb a little so the shape measures are not trivial, then open one face.
     for (i, p) in m.vertices.iter_mut().enumerate() {
         p[0] += 0.01 * ((i * 7 % 5) as f64 - 2.0);
     }
     m.faces.pop();
-    let path = dir.join("pred.obj");
+    let path = dir.path("pred.obj");
     write_obj(&path, &m);
     let j = json_of(&p2q(&["eval", path.to_str().unwrap(), "--json"]));
     let lib = mesh_metrics(&m);
@@ -76,11 +79,11 @@ fn eval_json_agrees_with_the_library() {
 
 #[test]
 fn eval_with_gt_reports_accuracy() {
-    let dir = temp_dir("eval_gt");
+    let dir = Scratch::new("quality_eval_gt");
     let gt = grid(6, 4);
     let mut pred = gt.clone();
     pred.faces.truncate(18);
-    let (gp, pp) = (dir.join("gt.obj"), dir.join("pred.obj"));
+    let (gp, pp) = (dir.path("gt.obj"), dir.path("pred.obj"));
     write_obj(&gp, &gt);
     write_obj(&pp, &pred);
     let j =
@@ -101,8 +104,8 @@ fn eval_with_gt_reports_accuracy() {
 
 #[test]
 fn eval_of_a_mesh_without_faces_is_all_finite() {
-    let dir = temp_dir("eval_empty");
-    let path = dir.join("points.obj");
+    let dir = Scratch::new("quality_eval_empty");
+    let path = dir.path("points.obj");
     std::fs::write(&path, "v 0 0 0\nv 1 0 0\n").unwrap();
     let j = json_of(&p2q(&["eval", path.to_str().unwrap(), "--json"]));
     for k in KEYS.iter().filter(|k| **k != "quad_only") {
@@ -116,12 +119,12 @@ fn eval_of_a_mesh_without_faces_is_all_finite() {
 /// Malformed files stay errors naming the file and line.
 #[test]
 fn eval_scores_an_empty_prediction_and_refuses_malformed_files() {
-    let dir = temp_dir("eval_empty_pred");
+    let dir = Scratch::new("quality_eval_empty_pred");
     let gt = grid(3, 2);
-    let gp = dir.join("gt.obj");
+    let gp = dir.path("gt.obj");
     write_obj(&gp, &gt);
     let g = gp.to_str().unwrap();
-    let points_only = dir.join("points.obj");
+    let points_only = dir.path("points.obj");
     write_obj(&points_only, &PolyMesh { vertices: gt.vertices.clone(), faces: vec![] });
     let mut ply0 = b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n".to_vec();
     ply0.extend_from_slice(
@@ -129,10 +132,10 @@ fn eval_scores_an_empty_prediction_and_refuses_malformed_files() {
     );
     let empties: Vec<(std::path::PathBuf, f64)> = vec![
         (points_only, gt.vertices.len() as f64),
-        (dir.join("zero_bytes.obj"), 0.0),
-        (dir.join("comments.obj"), 0.0),
-        (dir.join("empty.off"), 0.0),
-        (dir.join("empty.ply"), 0.0),
+        (dir.path("zero_bytes.obj"), 0.0),
+        (dir.path("comments.obj"), 0.0),
+        (dir.path("empty.off"), 0.0),
+        (dir.path("empty.ply"), 0.0),
     ];
     std::fs::write(&empties[1].0, b"").unwrap();
     std::fs::write(&empties[2].0, b"# no output\no nothing\n").unwrap();
@@ -183,7 +186,7 @@ fn eval_scores_an_empty_prediction_and_refuses_malformed_files() {
         ("lying.off", b"OFF\n2 0 0\n0 0 0\n", "truncated"),
         ("unterminated.ply", b"ply\nformat ascii 1.0\n", "header not terminated"),
     ] {
-        let path = dir.join(name);
+        let path = dir.path(name);
         std::fs::write(&path, bytes).unwrap();
         let out = p2q(&["eval", path.to_str().unwrap(), "--gt", g]);
         let err = String::from_utf8_lossy(&out.stderr);
@@ -192,7 +195,7 @@ fn eval_scores_an_empty_prediction_and_refuses_malformed_files() {
         assert!(out.stdout.is_empty(), "{name}");
     }
     let zero = empties[1].0.to_str().unwrap();
-    let svg = dir.join("zero.svg");
+    let svg = dir.path("zero.svg");
     for args in [vec!["eval", g, "--gt", zero], vec!["render", zero, "-o", svg.to_str().unwrap()]] {
         let out = p2q(&args);
         let err = String::from_utf8_lossy(&out.stderr);
@@ -204,16 +207,16 @@ fn eval_scores_an_empty_prediction_and_refuses_malformed_files() {
 
 #[test]
 fn eval_and_render_fail_cleanly_on_bad_usage() {
-    let dir = temp_dir("bad_usage");
-    let missing = dir.join("missing.obj");
+    let dir = Scratch::new("quality_bad_usage");
+    let missing = dir.path("missing.obj");
     let out = p2q(&["eval", missing.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("missing.obj"));
     assert_eq!(p2q(&["eval"]).status.code(), Some(2));
     assert_eq!(p2q(&["eval", "a.obj", "--bogus"]).status.code(), Some(2));
-    let m = dir.join("m.obj");
+    let m = dir.path("m.obj");
     write_obj(&m, &grid(2, 2));
-    let svg = dir.join("m.svg");
+    let svg = dir.path("m.svg");
     let (ms, ss) = (m.to_str().unwrap(), svg.to_str().unwrap());
     assert_eq!(p2q(&["render", ms]).status.code(), Some(2)); // no -o
     assert_eq!(p2q(&["render", ms, "-o", ss, "--view", "30"]).status.code(), Some(2));
@@ -227,9 +230,9 @@ fn eval_and_render_fail_cleanly_on_bad_usage() {
 
 #[test]
 fn render_writes_a_well_formed_svg() {
-    let dir = temp_dir("render");
+    let dir = Scratch::new("quality_render");
     let m = torus(20, 10, 0.4);
-    let (mp, sp) = (dir.join("t.obj"), dir.join("t.svg"));
+    let (mp, sp) = (dir.path("t.obj"), dir.path("t.svg"));
     write_obj(&mp, &m);
     let out = p2q(&[
         "render",

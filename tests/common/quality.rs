@@ -79,31 +79,6 @@ pub fn write_obj(path: &std::path::Path, m: &PolyMesh) {
     std::fs::write(path, s).expect("test: write obj");
 }
 
-/// A fresh temporary directory for one test, removed when the value is dropped (at the
-/// end of the test, pass or fail).
-pub fn temp_dir(name: &str) -> TempDir {
-    let d = std::env::temp_dir().join(format!("p2q_quality_{}_{}", name, std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("test: temp dir");
-    TempDir(d)
-}
-
-/// [`temp_dir`]'s folder: a path (through `Deref`) that removes itself on drop.
-pub struct TempDir(std::path::PathBuf);
-
-impl std::ops::Deref for TempDir {
-    type Target = std::path::Path;
-    fn deref(&self) -> &std::path::Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
 /// A parsed JSON value.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Json {

@@ -505,7 +505,7 @@ pub fn run(argv: &[String]) -> Result<()> {
             input.display(),
             rep.candidates,
             rep.predicted,
-            best_hint(rep.predicted, rep.best_probability, cfg.threshold),
+            best_hint(rep.predicted, rep.best_probability),
             off_default_candidates(&cfg.candidates)
         ));
     }
@@ -548,9 +548,9 @@ pub fn run(argv: &[String]) -> Result<()> {
 /// best candidate's probability and the `--threshold` that would keep it (tiny or odd
 /// clouds, where the model hesitates everywhere: an 8-point cube's 6 candidates
 /// score 0.1–0.5). Empty otherwise.
-fn best_hint(predicted: usize, best: Option<f32>, threshold: f32) -> String {
+fn best_hint(predicted: usize, best: Option<f32>) -> String {
     match best {
-        Some(p) if predicted == 0 && p <= threshold => format!(
+        Some(p) if predicted == 0 => format!(
             "; the most probable candidate scored {p:.3}: `--threshold` below that keeps the \
              candidates above it"
         ),

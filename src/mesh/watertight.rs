@@ -43,7 +43,7 @@ use super::halfedge::{corner_set, HalfedgeMesh};
 use super::handles::{FaceId, HalfedgeId, VertexId};
 use super::hole_fill::{fill_holes, scaled_jacobian, HoleFillConfig};
 use super::poly::QuadMesh;
-use super::quality::is_degenerate_quad;
+use super::quality::{is_degenerate_quad, DEGENERATE_QUAD_TOL};
 use super::rescue::{rescue_faces, RescueConfig};
 use crate::error::{Error, Result};
 use crate::math::{add, cross, norm, normalize, scale, sub};
@@ -221,15 +221,18 @@ pub fn close_all(
             continue;
         }
         if cfg.split_long_loops {
-            let quads = split_and_fill(&mut hm, &mut pos, &vs, cfg.max_quadrangulate_edges, &shape_only);
-            if add_all(&mut hm, &quads) {
-                continue;
+            if let Some(pieces) = split_and_fill(&hm, &pos, &vs, cfg.max_quadrangulate_edges, &shape_only) {
+                let quads = commit_pieces(&mut hm, &mut pos, pieces);
+                if add_all(&mut hm, &quads) {
+                    continue;
+                }
             }
         }
         fan(&mut hm, &mut pos, &vs);
     }
     smooth_added(&hm, &mut pos, mesh.vertices.len(), cfg.smoothing_steps);
     maximin_added(&hm, &mut pos, mesh.vertices.len(), cfg.maximin_sweeps);
+    separate_added(&hm, &mut pos, mesh.vertices.len());
     report.loops_filled = loops_before.saturating_sub(open_loops(&hm, limit).len());
     report.loops_left = hm.boundary_loops().len();
     report.quads_added = hm.n_faces() - faces_before - report.rescued;
@@ -241,28 +244,39 @@ pub fn close_all(
 /// ([`split_and_fill`]).
 const FAN_EDGES: usize = 16;
 
-/// Quads closing the even loop `vs` (from-vertices of its boundary half-edges, in
+/// How [`split_and_fill`] closes one piece of a loop: quads over its own vertices, or a
+/// fan round a new vertex at the centroid of these loop vertices.
+enum Piece {
+    Quads(Vec<[u32; 4]>),
+    Fan(Vec<u32>),
+}
+
+/// How to close the even loop `vs` (from-vertices of its boundary half-edges, in
 /// order): its quadrangulation over its own vertices where one meets the shape bound
 /// (up to `max_dp` edges); else, above [`FAN_EDGES`] edges, the loop is cut by the chord
-/// (i, j) with j − i odd (both pieces even, at least 4 edges) and no edge of the mesh
-/// already, of least length per loop step on the shorter side, and each piece is closed
-/// the same way; else a fan round a new vertex at its centroid (added to `hm` and `pos`).
-/// The quads share the chords, so together they close the loop.
+/// (i, j) with j − i odd (both pieces even, at least 4 edges, neither [`flat`]) and no
+/// edge of the mesh already, of least length per loop step on the shorter side, and
+/// each piece is closed the same way; else a fan round a new vertex at its centroid.
+/// The pieces share the chords, so together they close the loop. `None` when a piece
+/// can only be closed by a degenerate quad ([`fan_is_sound`]; session 37: a flat
+/// sheet's straight border cut into collinear pieces gave quads of no area); nothing
+/// is added to the mesh either way ([`commit_pieces`] does that).
 fn split_and_fill(
-    hm: &mut HalfedgeMesh,
-    pos: &mut Vec<[f64; 3]>,
+    hm: &HalfedgeMesh,
+    pos: &[[f64; 3]],
     vs: &[u32],
     max_dp: usize,
     shape: &CloseConfig,
-) -> Vec<[u32; 4]> {
+) -> Option<Vec<Piece>> {
     let n = vs.len();
     if n == 4 {
-        return vec![[vs[0], vs[1], vs[2], vs[3]]];
+        let q = [vs[0], vs[1], vs[2], vs[3]];
+        return (!is_degenerate_quad(&q.map(|v| pos[v as usize]))).then(|| vec![Piece::Quads(vec![q])]);
     }
     if n <= max_dp {
         let across = vec![None; n];
         if let Some(q) = quadrangulate(hm, pos, vs, &across, shape) {
-            return q;
+            return Some(vec![Piece::Quads(q)]);
         }
     }
     if n > FAN_EDGES {
@@ -279,7 +293,10 @@ fn split_and_fill(
                 let (a, b) = (pos[vs[i] as usize], pos[vs[j] as usize]);
                 let len = norm(sub(a, b));
                 let score = len / d.min(n - d) as f64;
-                if best.map_or(true, |(s, _, _)| score < s) {
+                if best.map_or(true, |(s, _, _)| score < s)
+                    && !flat(pos, &vs[i..=j])
+                    && !flat(pos, &vs[j..].iter().chain(&vs[..=i]).copied().collect::<Vec<u32>>())
+                {
                     best = Some((score, i, j));
                 }
             }
@@ -287,12 +304,61 @@ fn split_and_fill(
         if let Some((_, i, j)) = best {
             let first: Vec<u32> = vs[i..=j].to_vec();
             let second: Vec<u32> = vs[j..].iter().chain(&vs[..=i]).copied().collect();
-            let mut quads = split_and_fill(hm, pos, &first, max_dp, shape);
-            quads.extend(split_and_fill(hm, pos, &second, max_dp, shape));
-            return quads;
+            let mut pieces = split_and_fill(hm, pos, &first, max_dp, shape)?;
+            pieces.extend(split_and_fill(hm, pos, &second, max_dp, shape)?);
+            return Some(pieces);
         }
     }
-    fan_quads(hm, pos, vs)
+    fan_is_sound(pos, vs).then(|| vec![Piece::Fan(vs.to_vec())])
+}
+
+/// Adds the fans' centres of `pieces` to `hm` and `pos` and returns every piece's quads.
+fn commit_pieces(hm: &mut HalfedgeMesh, pos: &mut Vec<[f64; 3]>, pieces: Vec<Piece>) -> Vec<[u32; 4]> {
+    let mut quads = Vec::new();
+    for p in pieces {
+        match p {
+            Piece::Quads(q) => quads.extend(q),
+            Piece::Fan(vs) => quads.extend(fan_quads(hm, pos, &vs)),
+        }
+    }
+    quads
+}
+
+/// True when the polygon `vs` has no area to speak of: the norm of its vector area
+/// (half the sum of the cross products of consecutive corners about the first) at most
+/// [`DEGENERATE_QUAD_TOL`] times its diameter squared (the largest distance from its
+/// first corner, doubled). Four or more corners on one line are flat; a fan over them
+/// has quads of no area.
+fn flat(pos: &[[f64; 3]], vs: &[u32]) -> bool {
+    let o = pos[vs[0] as usize];
+    let mut area = [0.0f64; 3];
+    let mut reach = 0.0f64;
+    for w in vs.windows(2) {
+        let (a, b) = (sub(pos[w[0] as usize], o), sub(pos[w[1] as usize], o));
+        area = add(area, cross(a, b));
+        reach = reach.max(norm(b));
+    }
+    let d = 2.0 * reach;
+    !(norm(area) > 2.0 * DEGENERATE_QUAD_TOL * d * d)
+}
+
+/// The centroid of the loop vertices `vs`.
+fn centroid(pos: &[[f64; 3]], vs: &[u32]) -> [f64; 3] {
+    scale(vs.iter().fold([0.0; 3], |s, &v| add(s, pos[v as usize])), 1.0 / vs.len() as f64)
+}
+
+/// Whether the fan [`fan_quads`] would build over the even loop `vs` has no
+/// degenerate quad ([`is_degenerate_quad`]).
+fn fan_is_sound(pos: &[[f64; 3]], vs: &[u32]) -> bool {
+    let n = vs.len();
+    let c = centroid(pos, vs);
+    n >= 4
+        && n % 2 == 0
+        && (0..n / 2).all(|i| {
+            let p =
+                [pos[vs[2 * i] as usize], pos[vs[2 * i + 1] as usize], pos[vs[(2 * i + 2) % n] as usize], c];
+            !is_degenerate_quad(&p)
+        })
 }
 
 /// The worst scaled Jacobian of `faces` (−∞ for a degenerate one).
@@ -322,20 +388,11 @@ fn maximin_added(hm: &HalfedgeMesh, pos: &mut [[f64; 3]], first: usize, sweeps: 
             let faces: Vec<[usize; 4]> =
                 hm.vertex_faces(vid).map(|f| hm.face_vertices(f).map(|x| x.idx())).collect();
             let nbrs: Vec<usize> = hm.vertex_outgoing(vid).map(|h| hm.to_vertex(h).idx()).collect();
-            if faces.is_empty() || nbrs.is_empty() {
+            if nbrs.is_empty() {
                 continue;
             }
-            // The quads' mean normal (diagonal cross products) and two tangents.
-            let n = faces.iter().fold([0.0; 3], |acc, q| {
-                add(acc, cross(sub(pos[q[2]], pos[q[0]]), sub(pos[q[3]], pos[q[1]])))
-            });
-            let Some(n) = normalize(n) else { continue };
-            let helper = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
-            let Some(t1) = normalize(cross(n, helper)) else { continue };
-            let t2 = cross(n, t1);
-            let dirs = [t1, scale(t1, -1.0), t2, scale(t2, -1.0), n, scale(n, -1.0)];
-            let mut h =
-                0.25 * nbrs.iter().map(|&u| norm(sub(pos[u], pos[v]))).sum::<f64>() / nbrs.len() as f64;
+            let Some(dirs) = step_directions(pos, &faces) else { continue };
+            let mut h = 0.25 * mean_reach(pos, v, &nbrs);
             let mut best = worst(pos, &faces);
             for _ in 0..MAXIMIN_HALVINGS {
                 // At most a few steps at one size, then a smaller one.
@@ -362,6 +419,102 @@ fn maximin_added(hm: &HalfedgeMesh, pos: &mut [[f64; 3]], first: usize, sweeps: 
                 }
                 h *= 0.5;
             }
+        }
+    }
+}
+
+/// The unit directions the pattern search steps along from a vertex whose quads are
+/// `faces`: two tangents of the quads' mean normal (summed diagonal cross products)
+/// and the normal, each both ways. `None` when the normal is undefined.
+fn step_directions(pos: &[[f64; 3]], faces: &[[usize; 4]]) -> Option<[[f64; 3]; 6]> {
+    if faces.is_empty() {
+        return None;
+    }
+    let n = faces
+        .iter()
+        .fold([0.0; 3], |acc, q| add(acc, cross(sub(pos[q[2]], pos[q[0]]), sub(pos[q[3]], pos[q[1]]))));
+    let n = normalize(n)?;
+    let helper = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+    let t1 = normalize(cross(n, helper))?;
+    let t2 = cross(n, t1);
+    Some([t1, scale(t1, -1.0), t2, scale(t2, -1.0), n, scale(n, -1.0)])
+}
+
+/// The mean distance from vertex `v` to its neighbours `nbrs`.
+fn mean_reach(pos: &[[f64; 3]], v: usize, nbrs: &[usize]) -> f64 {
+    nbrs.iter().map(|&u| norm(sub(pos[u], pos[v]))).sum::<f64>() / nbrs.len() as f64
+}
+
+/// How much [`separate_added`] may lower the worst scaled Jacobian of a vertex's quads.
+const SEPARATE_SLACK: f64 = 0.01;
+
+/// Two vertices closer than this share of an added vertex's mean edge length count as
+/// one position for [`separate_added`].
+const SAME_POSITION: f64 = 1e-6;
+
+/// Moves each vertex from `first` on that lies on another vertex (within
+/// [`SAME_POSITION`] of its mean edge length; session 37's audit: a fan's centre on a
+/// flat sheet's closing landed on a point of the sheet, which a metric that matches
+/// vertices by position cannot tell apart) off it: along the best of the
+/// [`step_directions`] that lands on no vertex and lowers the worst scaled Jacobian of
+/// its quads by at most [`SEPARATE_SLACK`] (a degenerate quad is never allowed), at
+/// 10⁻³ of its mean edge length, halved up to 20 times. A vertex no step frees stays
+/// where it is.
+fn separate_added(hm: &HalfedgeMesh, pos: &mut [[f64; 3]], first: usize) {
+    if first >= pos.len() {
+        return;
+    }
+    // Every vertex by x, to find those near a position; added vertices move by less
+    // than `drift` in all, which widens the window.
+    let mut by_x: Vec<usize> = (0..pos.len()).collect();
+    by_x.sort_by(|&a, &b| pos[a][0].total_cmp(&pos[b][0]));
+    let xs: Vec<f64> = by_x.iter().map(|&i| pos[i][0]).collect();
+    let mut drift = 0.0f64;
+    let near = |pos: &[[f64; 3]], v: usize, p: [f64; 3], tol: f64, drift: f64| {
+        let lo = xs.partition_point(|&x| x < p[0] - tol - drift);
+        let hi = xs.partition_point(|&x| x <= p[0] + tol + drift);
+        by_x[lo..hi].iter().any(|&j| j != v && norm(sub(pos[j], p)) <= tol)
+    };
+    for v in first..pos.len() {
+        let vid = VertexId(v as u32);
+        let nbrs: Vec<usize> = hm.vertex_outgoing(vid).map(|h| hm.to_vertex(h).idx()).collect();
+        if nbrs.is_empty() {
+            continue;
+        }
+        let reach = mean_reach(pos, v, &nbrs);
+        let tol = SAME_POSITION * reach;
+        if !(tol > 0.0 && tol.is_finite()) || !near(pos, v, pos[v], tol, drift) {
+            continue;
+        }
+        let faces: Vec<[usize; 4]> =
+            hm.vertex_faces(vid).map(|f| hm.face_vertices(f).map(|x| x.idx())).collect();
+        let Some(dirs) = step_directions(pos, &faces) else { continue };
+        let old = pos[v];
+        let before = worst(pos, &faces);
+        let mut h = 1e-3 * reach;
+        let mut moved = None;
+        for _ in 0..20 {
+            let mut pick: Option<([f64; 3], f64)> = None;
+            for d in dirs {
+                let p = add(old, scale(d, h));
+                if near(pos, v, p, tol, drift) {
+                    continue;
+                }
+                pos[v] = p;
+                let w = worst(pos, &faces);
+                if w >= before - SEPARATE_SLACK && pick.map_or(true, |(_, b)| w > b) {
+                    pick = Some((p, w));
+                }
+            }
+            if let Some((p, _)) = pick {
+                moved = Some(p);
+                break;
+            }
+            h *= 0.5;
+        }
+        pos[v] = moved.unwrap_or(old);
+        if moved.is_some() {
+            drift = drift.max(2.0 * h);
         }
     }
 }
@@ -400,8 +553,11 @@ fn has_repeat(vs: &[u32]) -> bool {
 
 /// Closes the even loop `vs` (from-vertices of its boundary half-edges, in order) by a
 /// fan of quads around a new vertex at its centroid; no face changes when they do not
-/// all go in.
+/// all go in, and nothing at all when a quad of the fan would be degenerate.
 fn fan(hm: &mut HalfedgeMesh, pos: &mut Vec<[f64; 3]>, vs: &[u32]) {
+    if !fan_is_sound(pos, vs) {
+        return;
+    }
     let quads = fan_quads(hm, pos, vs);
     // When they do not go in, the vertex stays, isolated (no face uses it).
     add_all(hm, &quads);
@@ -411,7 +567,7 @@ fn fan(hm: &mut HalfedgeMesh, pos: &mut Vec<[f64; 3]>, vs: &[u32]) {
 /// round a new vertex `c` at its centroid (added to `hm` and `pos`).
 fn fan_quads(hm: &mut HalfedgeMesh, pos: &mut Vec<[f64; 3]>, vs: &[u32]) -> Vec<[u32; 4]> {
     let n = vs.len();
-    let centre = scale(vs.iter().fold([0.0; 3], |s, &v| add(s, pos[v as usize])), 1.0 / n as f64);
+    let centre = centroid(pos, vs);
     let c = hm.add_vertex();
     pos.push(centre);
     (0..n / 2).map(|i| [vs[2 * i], vs[2 * i + 1], vs[(2 * i + 2) % n], c.0]).collect()
@@ -607,7 +763,8 @@ mod tests {
                 let (mut hm, mut pos, vs) = sheet(nu, nv, 0.3);
                 let n = vs.len();
                 let first_new = pos.len();
-                let quads = split_and_fill(&mut hm, &mut pos, &vs, 0, &shape);
+                let pieces = split_and_fill(&hm, &pos, &vs, 0, &shape).expect("a sound split");
+                let quads = commit_pieces(&mut hm, &mut pos, pieces);
                 assert!(add_all(&mut hm, &quads), "{nu}x{nv}: the quads do not go in");
                 validate(&hm).unwrap();
                 assert!(hm.boundary_loops().is_empty(), "{nu}x{nv}");

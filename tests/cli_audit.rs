@@ -403,6 +403,7 @@ fn a_far_outlier_is_left_out_and_named() {
         let cloud = dir.write("o.xyz", &xyz(&pts));
         let err = assert_ok(&p2q(&["reconstruct", &cloud, "-o", &out]), "grid + outlier");
         assert!(err.contains("1 far outlier(s) left out") && err.contains("point 17 "), "{err}");
+        assert!(!err.contains("on their own"), "{err}");
         // Indices past the outlier shift by one in the output.
         let shifted: Vec<String> = want
             .iter()
@@ -940,4 +941,47 @@ fn reconstruct_options_that_do_nothing_are_named() {
         "a bound under a raised threshold",
     );
     assert!(!faces(&out).is_empty());
+}
+
+/// Session 37's audit: `synth --from` a mesh of no area with noise points failed with
+/// "cannot place N noise points: the mesh's area is 0", naming no file. It names the
+/// mesh now, once, and writes nothing.
+#[test]
+fn synth_from_a_mesh_without_area_names_it() {
+    let dir = Scratch::new("audit37_synth");
+    let flat: String = (0..4).map(|i| format!("v {i} 0 0\n")).collect::<String>() + "f 1 2 3 4\n";
+    let mesh = dir.write("flat.obj", flat.as_bytes());
+    let out = dir.p("s.xyz");
+    let r = p2q(&["synth", "--from", &mesh, "-o", &out, "--noise", "0.5"]);
+    assert_fails(&r, 1, &["flat.obj: cannot place", "area is 0"], "synth --from a mesh of no area");
+    let err = stderr(&r);
+    assert_eq!(err.matches("flat.obj").count(), 1, "{err}");
+    assert!(!dir.path("s.xyz").exists());
+}
+
+/// Session 37's audit: more points in a 1e-9 speck than on the object beside it make
+/// the object the far outliers (the majority is kept, by design: a stray cloud of many
+/// points far away looks the same). The warning says that a large share was left out,
+/// that the packed part is what gets reconstructed, and how to get the other part.
+#[test]
+fn many_far_outliers_are_called_a_part_of_their_own() {
+    let dir = Scratch::new("audit37_speck");
+    let mut pts: Vec<[f64; 3]> = (0..900).map(|i| [(i % 30) as f64, (i / 30) as f64, 0.0]).collect();
+    let mut state = 12345u64;
+    let mut unit = || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    for _ in 0..1000 {
+        pts.push([5.0 + 1e-9 * unit(), 5.0 + 1e-9 * unit(), 1e-9 * unit()]);
+    }
+    let cloud = dir.write("speck.xyz", &xyz(&pts));
+    let out = dir.p("speck.obj");
+    let err = assert_ok(&p2q(&["reconstruct", &cloud, "-o", &out]), "grid + speck");
+    // 899: the grid point at the speck's position stays with it.
+    assert!(
+        err.contains("899 far outlier(s) left out") && err.contains("That is 47% of the points"),
+        "{err}"
+    );
+    assert!(err.contains("reconstruct them on their own"), "{err}");
 }

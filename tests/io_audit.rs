@@ -405,3 +405,36 @@ fn obj_index_out_of_range_names_the_face_either_way() {
     let m = mesh_ok(&dir, "fwd.obj", "f 1 2 3 4\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n");
     assert_eq!(m.faces, vec![vec![0, 1, 2, 3]]);
 }
+
+/// Session 37's audit: a PLY whose vertex properties are `X`, `Y`, `Z` was refused ("no
+/// property 'x'"), while the text readers take any case. Any case reads the same points
+/// as lower case, ascii and binary; an exact lower-case name wins over another case.
+#[test]
+fn ply_coordinate_names_in_any_case() {
+    let dir = Scratch::new("io_audit_plycase");
+    let read = |file: &str, src: &[u8]| {
+        let p = dir.write(file, src);
+        read_points(std::path::Path::new(&p)).unwrap_or_else(|e| panic!("{file}: {e}"))
+    };
+    let header = |fmt: &str, names: [&str; 3]| {
+        format!(
+            "ply\nformat {fmt} 1.0\nelement vertex 2\nproperty double {}\nproperty double {}\nproperty double {}\nend_header\n",
+            names[0], names[1], names[2]
+        )
+    };
+    let body = "1 2 3\n4.5 -5 6\n";
+    let lower = read("l.ply", (header("ascii", ["x", "y", "z"]) + body).as_bytes());
+    assert_eq!(lower, vec![[1.0, 2.0, 3.0], [4.5, -5.0, 6.0]]);
+    for names in [["X", "Y", "Z"], ["x", "Y", "z"]] {
+        assert_eq!(read("u.ply", (header("ascii", names) + body).as_bytes()), lower, "{names:?}");
+        let mut bin = header("binary_little_endian", names).into_bytes();
+        for v in [1.0f64, 2.0, 3.0, 4.5, -5.0, 6.0] {
+            bin.extend(v.to_le_bytes());
+        }
+        assert_eq!(read("b.ply", &bin), lower, "binary {names:?}");
+    }
+    // `X` first, then `x`: the exact name is the coordinate.
+    let src = "ply\nformat ascii 1.0\nelement vertex 1\nproperty double X\nproperty double x\n\
+               property double y\nproperty double z\nend_header\n9 1 2 3\n";
+    assert_eq!(read("both.ply", src.as_bytes()), vec![[1.0, 2.0, 3.0]]);
+}

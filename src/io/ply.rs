@@ -675,10 +675,14 @@ fn read_vertices(
 ) -> Result<()> {
     let mut axis_prop = [usize::MAX; 3];
     for (a, an) in ["x", "y", "z"].iter().enumerate() {
-        let i =
-            el.props.iter().position(|p| p.name == *an).ok_or_else(|| {
-                Error::parse(name, el.line, format!("element vertex has no property '{an}'"))
-            })?;
+        // The exact name first, then any case (session 37's audit: `property double X`
+        // was refused, while the text readers take any case in a header).
+        let i = el
+            .props
+            .iter()
+            .position(|p| p.name == *an)
+            .or_else(|| el.props.iter().position(|p| p.name.eq_ignore_ascii_case(an)))
+            .ok_or_else(|| Error::parse(name, el.line, format!("element vertex has no property '{an}'")))?;
         if let Kind::List { .. } = el.props[i].kind {
             return Err(Error::parse(name, el.line, format!("vertex property '{an}' is a list")));
         }

@@ -607,8 +607,24 @@ pub fn hygiene_notes(cmd: &str, input: &std::path::Path, points: &[[f64; 3]], h:
         ));
     }
     if let Some(i) = h.first_outlier {
+        // Many "outliers" are a part of their own (session 37's audit: 2,000 points in a
+        // 1e-9 speck beside a 1,910-point cube made the cube the outliers): say which
+        // part was kept, and how to get the other.
+        let many = if h.outliers * 10 >= points.len() {
+            format!(
+                concat!(
+                    ". That is {:.0}% of the points: the rest, packed more than {:.0e} times closer ",
+                    "together, is what gets reconstructed; if the left-out points are the object, ",
+                    "reconstruct them on their own"
+                ),
+                100.0 * h.outliers as f64 / points.len() as f64,
+                point2quad::pipeline::reconstruct::OUTLIER_RADII
+            )
+        } else {
+            String::new()
+        };
         crate::output::stderr(&format!(
-            "{cmd}: warning: {}: {} far outlier(s) left out (more than {:.0e} times the cloud's radius away); the first is point {i} (counting from 0) at {:?}\n",
+            "{cmd}: warning: {}: {} far outlier(s) left out (more than {:.0e} times the cloud's radius away); the first is point {i} (counting from 0) at {:?}{many}\n",
             input.display(),
             h.outliers,
             point2quad::pipeline::reconstruct::OUTLIER_RADII,

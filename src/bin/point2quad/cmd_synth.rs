@@ -74,16 +74,19 @@ pub fn run(argv: &[String]) -> Result<()> {
     let jitter = a.parsed_in(cmd, "--jitter", 0.0f64, 0.0, 1.0, "a fraction of the mean edge length")?;
     let mut rng = Rng::new(seed);
     let shape = a.value("--shape").unwrap_or("random");
+    // Errors about a mesh read from a file name it, once: not "invalid input: FILE:
+    // invalid input: …" (session 37's audit: the noise step's "the mesh's area is 0"
+    // named no file).
+    let named = |e: Error| match (e, a.value("--from")) {
+        (Error::InvalidInput(m), Some(from)) => Error::invalid(format!("{from}: {m}")),
+        (other, _) => other,
+    };
     let mesh = if let Some(from) = a.value("--from") {
         if a.value("--shape").is_some() {
             return Err(Error::Usage(format!("{cmd}: give --from or --shape, not both")));
         }
         let poly = read_mesh(Path::new(from))?;
-        // Named once: not "invalid input: FILE: invalid input: …".
-        poly.to_quads().map_err(|e| match e {
-            Error::InvalidInput(m) => Error::invalid(format!("{from}: {m}")),
-            other => other,
-        })?
+        poly.to_quads().map_err(named)?
     } else if shape == "random" {
         random_shape(&mut rng)
     } else {
@@ -93,9 +96,9 @@ pub fn run(argv: &[String]) -> Result<()> {
         random_shape_of(fam, &mut rng)
     };
     // Drawn before the noise points (zero jitter draws nothing: the same cloud as without).
-    let mesh = jitter_vertices(&mesh, jitter, &mut rng)?;
+    let mesh = jitter_vertices(&mesh, jitter, &mut rng).map_err(named)?;
     let mut cloud = mesh.vertices.clone();
-    cloud.extend(noise_points(&mesh, &noise, &mut rng)?);
+    cloud.extend(noise_points(&mesh, &noise, &mut rng).map_err(named)?);
     // Both files in full before either replaces its target: half a result is worse
     // than none, and a failed --gt must not cost the old content of -o.
     let mut staged = vec![prepare_points_xyz(Path::new(out), &cloud)?];

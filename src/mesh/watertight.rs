@@ -339,7 +339,9 @@ fn flat(pos: &[[f64; 3]], vs: &[u32]) -> bool {
         reach = reach.max(norm(b));
     }
     let d = 2.0 * reach;
-    !(norm(area) > 2.0 * DEGENERATE_QUAD_TOL * d * d)
+    // NaN counts as flat.
+    let a = norm(area);
+    a.is_nan() || a <= 2.0 * DEGENERATE_QUAD_TOL * d * d
 }
 
 /// The centroid of the loop vertices `vs`.
@@ -483,7 +485,7 @@ fn separate_added(hm: &HalfedgeMesh, pos: &mut [[f64; 3]], first: usize) {
         }
         let reach = mean_reach(pos, v, &nbrs);
         let tol = SAME_POSITION * reach;
-        if !(tol > 0.0 && tol.is_finite()) || !near(pos, v, pos[v], tol, drift) {
+        if !(tol > 0.0 && tol.is_finite() && near(pos, v, pos[v], tol, drift)) {
             continue;
         }
         let faces: Vec<[usize; 4]> =

@@ -994,18 +994,32 @@ fn many_far_outliers_are_called_a_part_of_their_own() {
 /// The 8 corners of a cube gave no faces until session 37: each corner's neighbourhood
 /// is the whole cube, its covariance isotropic, its PCA normal arbitrary, and 4 of the
 /// 6 candidates crossed the inside. With the offset from the neighbourhood's mean as
-/// the normal there (`normals::ISOTROPIC_RATIO`), the cube comes back whole: exactly
-/// its 6 faces, closed, at several sizes, rotations and offsets.
+/// the normal there (`normals::ISOTROPIC_RATIO`; for a box's corners, a whole cloud,
+/// `normals::WHOLE_CLOUD_RATIO`), a cube and 1 × 1 × 3 and 1 × 2 × 3 boxes (2 and 0 faces
+/// before) come back whole: exactly their 6 faces, closed, at several sizes, rotations
+/// and offsets.
 #[test]
 fn eight_cube_corners_give_the_six_faces() {
     let dir = Scratch::new("cube8");
-    for (case, (scale, angle, offset)) in
-        [(1.0, 0.0, 0.0), (1e-3, 0.7, 5.0), (250.0, 2.1, -40.0), (1.0, 1.2, 1e4)].into_iter().enumerate()
+    for (case, (scale, angle, offset, size)) in [
+        (1.0, 0.0, 0.0, [1.0, 1.0, 1.0]),
+        (1e-3, 0.7, 5.0, [1.0, 1.0, 1.0]),
+        (250.0, 2.1, -40.0, [1.0, 1.0, 1.0]),
+        (1.0, 1.2, 1e4, [1.0, 1.0, 1.0]),
+        (1.0, 0.4, 0.0, [1.0, 1.0, 3.0]),
+        (7.0, 2.5, 3.0, [1.0, 2.0, 3.0]),
+    ]
+    .into_iter()
+    .enumerate()
     {
         let (c, s) = (f64::cos(angle), f64::sin(angle));
         let corners: Vec<[f64; 3]> = (0..8)
             .map(|i| {
-                let p = [(i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64];
+                let p = [
+                    (i & 1) as f64 * size[0],
+                    ((i >> 1) & 1) as f64 * size[1],
+                    ((i >> 2) & 1) as f64 * size[2],
+                ];
                 // A turn about z, then one about x, so no edge stays axis-aligned.
                 let q = [c * p[0] - s * p[1], s * p[0] + c * p[1], p[2]];
                 let r = [q[0], c * q[1] - s * q[2], s * q[1] + c * q[2]];

@@ -182,7 +182,7 @@ impl SampleGeometry {
         let it = &aug.inverse_transpose;
         let computed = crate::par::map(self.corners.len(), |k| {
             let i = self.corners[k] as usize;
-            let nv = pca_normal(moved, moved[i], &self.normal_rows[i * w..(i + 1) * w]);
+            let nv = pca_normal(moved, moved[i], &self.normal_rows[i * w..(i + 1) * w], w >= moved.len());
             let reference = mat_vec(it, crate::math::to_f64(self.normals[i]));
             let agree =
                 nv[0] as f64 * reference[0] + nv[1] as f64 * reference[1] + nv[2] as f64 * reference[2];

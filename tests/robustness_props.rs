@@ -298,3 +298,37 @@ proptest! {
         prop_assert!((ca - cb).abs() <= 1e-12 * ca.max(1e-12), "{} vs {}", ca, cb);
     }
 }
+
+/// Session 37's audit: a ground truth spanning ±1.7e308 was refused by `compare` (its
+/// bounding-box diagonal overflows, though every coordinate and half the diagonal are
+/// finite). A centred grid scaled by 2^1021 and 2^1022 (exact) scores as the unit grid:
+/// the same precision, recall and matches, the Chamfer distance equal to rounding.
+#[test]
+fn compare_takes_a_ground_truth_as_wide_as_f64_allows() {
+    let mut gt = grid(4, 3);
+    let n = gt.vertices.len() as f64;
+    let c: [f64; 3] = std::array::from_fn(|k| gt.vertices.iter().map(|p| p[k]).sum::<f64>() / n);
+    for p in &mut gt.vertices {
+        *p = std::array::from_fn(|k| p[k] - c[k]);
+    }
+    let mut pred = gt.clone();
+    pred.faces.truncate(gt.faces.len() - 2);
+    let a = compare(&pred, &gt, 3).expect("test: unit compare");
+    for k in [1021, 1022] {
+        let s = 2f64.powi(k);
+        let scale = |m: &PolyMesh| PolyMesh {
+            vertices: m.vertices.iter().map(|p| p.map(|c| c * s)).collect(),
+            faces: m.faces.clone(),
+        };
+        let wide = scale(&gt);
+        assert!(wide.vertices.iter().flatten().all(|c| c.is_finite()), "2^{k}: the test's grid overflows");
+        let b = compare(&scale(&pred), &wide, 3).unwrap_or_else(|e| panic!("2^{k}: {e}"));
+        assert_eq!(
+            (a.precision, a.recall, a.matched_vertices),
+            (b.precision, b.recall, b.matched_vertices),
+            "2^{k}"
+        );
+        let (ca, cb) = (a.chamfer.expect("test: chamfer"), b.chamfer.expect("test: chamfer"));
+        assert!((ca - cb).abs() <= 1e-12 * ca.max(1e-12), "2^{k}: {ca} vs {cb}");
+    }
+}

@@ -562,8 +562,12 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
         return Err(Error::invalid("ground-truth mesh has no faces"));
     }
     let (lo, hi) = face_bounds(gt).ok_or_else(|| Error::invalid("ground-truth mesh has no finite vertex"))?;
-    let diag = scaled_norm(std::array::from_fn(|k| 0.5 * hi[k] - 0.5 * lo[k])) * 2.0;
-    if !(diag > 0.0 && diag.is_finite()) {
+    // Half the diagonal: the whole one overflows for a ground truth spanning ±1.7e308
+    // (session 37's audit). Coordinates are divided by it and halved, which is the
+    // division by the diagonal, bit for bit (halving is exact).
+    let half_diag = scaled_norm(std::array::from_fn(|k| 0.5 * hi[k] - 0.5 * lo[k]));
+    let per_diag = |d: f64| d / half_diag * 0.5;
+    if !(half_diag > 0.0 && half_diag.is_finite()) {
         return Err(Error::invalid(format!(
             "ground-truth mesh has a zero (or non-finite) bounding-box diagonal: bounds {lo:?} to {hi:?}"
         )));
@@ -573,7 +577,7 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
     // A predicted face beyond the clamp would get a clamped Chamfer distance.
     let far = pred.faces.iter().flatten().find_map(|&v| {
         let p = pred.vertices.get(v as usize)?;
-        let d = (0..3).map(|k| ((p[k] - centre[k]) / diag).abs()).fold(0.0, f64::max);
+        let d = (0..3).map(|k| per_diag(p[k] - centre[k]).abs()).fold(0.0, f64::max);
         (p.iter().all(|c| c.is_finite()) && d > FAR_CLAMP).then_some((v, d))
     });
     if let Some((v, d)) = far {
@@ -592,7 +596,7 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
         if !p.iter().all(|c| c.is_finite()) {
             return p;
         }
-        std::array::from_fn(|k| ((p[k] - centre[k]) / diag).clamp(-FAR_CLAMP, FAR_CLAMP))
+        std::array::from_fn(|k| per_diag(p[k] - centre[k]).clamp(-FAR_CLAMP, FAR_CLAMP))
     };
     // Sampling happens in the frame too (area weights are invariant under the uniform
     // scale): a 1e200-sized mesh has triangle areas that overflow in world units.

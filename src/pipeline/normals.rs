@@ -40,13 +40,13 @@ pub fn estimate_normals(points: &[[f32; 3]], knn: &KnnTable) -> Vec<[f32; 3]> {
 }
 
 /// A neighbourhood whose smallest covariance eigenvalue is at least this share of its
-/// largest is nearly isotropic: no plane fits it, and [`pca_normal`] takes the
+/// largest is nearly isotropic: no plane fits it, and the PCA step takes the
 /// direction from the neighbourhood's mean to the point instead (session 37; 0.8 was
 /// chosen before any result, and the held-out judge sets' reconstructions did not
 /// change: real surfaces' neighbourhoods are far flatter).
 pub const ISOTROPIC_RATIO: f64 = 0.8;
 
-/// Where the neighbourhood is the whole cloud (`whole` in [`pca_normal`]: a cloud of at
+/// Where the neighbourhood is the whole cloud (a cloud of at
 /// most `normal_k` + 1 points), the offset from the mean is the normal also when the
 /// smallest covariance eigenvalue is at least this share of the middle one: a tiny
 /// closed shape, such as a box's 8 corners (1 × 1 × 3 or 1 × 2 × 3 boxes gave 2 and 0

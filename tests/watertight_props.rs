@@ -257,7 +257,7 @@ fn candidates_fill_a_hole_before_anything_is_invented() {
 }
 
 /// Panics when a vertex of `m` from `first` on lies within `tol` of another vertex.
-pub fn assert_apart(m: &QuadMesh, first: usize, tol: f64, what: &str) {
+fn assert_apart(m: &QuadMesh, first: usize, tol: f64, what: &str) {
     for (i, a) in m.vertices.iter().enumerate().skip(first) {
         for (j, b) in m.vertices.iter().enumerate().take(i) {
             let d = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();

@@ -60,7 +60,7 @@ pub const WHOLE_CLOUD_RATIO: f64 = 0.2;
 pub const NOT_A_LINE_RATIO: f64 = 0.01;
 
 /// The offset from the neighbourhood's mean must exceed this share of the
-/// neighbourhood's spread (the square root of the covariance trace) for
+/// neighbourhood's spread (the square root of its summed squared deviations from the mean) for
 /// [`ISOTROPIC_RATIO`]'s rule: a point at the centre of a symmetric blob has no
 /// outward direction either, and keeps the PCA normal.
 pub const ISOTROPIC_MIN_OFFSET: f64 = 1e-3;

@@ -512,6 +512,12 @@ struct Scratch {
     t1: Vec<i8>,
     t2: Vec<i8>,
     t3: Vec<i8>,
+    /// `c0[x·w + y]`: the sine of the proposer's corner of a quad whose cyclic order
+    /// is [0, y, …, x] (`Local::stage2`'s corner 0), or −1 where that corner fails
+    /// its sine or normal filter.
+    c0: Vec<f32>,
+    /// `c0_bound[x·w + y]`: [`jacobian_bound`] of that corner.
+    c0_bound: Vec<f32>,
     /// Triples past `Local::stage1`.
     ordered: Vec<Ordered>,
     pre: Vec<Pre>,
@@ -548,6 +554,27 @@ struct Ordered {
     local: [usize; 3],
     /// `w_length · (lbar / sbar − 1)`: the base score without its shape term.
     length_term: f32,
+    /// A lower bound of the base score: `length_term` plus the shape term with the
+    /// scaled Jacobian bounded by the proposer's corner sine (see [`jacobian_bound`]).
+    bound: f32,
+}
+
+/// An upper bound of a quad's scaled Jacobian (as `Local::stage2` computes it, in
+/// floating point) from the sine of one of its corners, `(cl / ll).min(1)` with `cl`
+/// the length of that corner's cross product and `ll` the product of its two edge
+/// lengths. The corner's Jacobian term is `dot(cross, n) / ll` with `n` a unit vector,
+/// at most `cl / ll` in exact arithmetic; the rounding of the dot product, the norms
+/// and the divisions stays far below the 1e-5 relative margin (about 15 units of the
+/// last place) as long as nothing underflows, which the floors on `cl` and `ll` ensure.
+/// Elsewhere the bound is the trivial 1 (plus the margin).
+#[inline]
+fn jacobian_bound(sine: f32, cl: f32, ll: f32) -> f32 {
+    const MARGIN: f32 = 1.0 + 1e-5;
+    if cl >= 1e-15 && ll >= 1e-15 {
+        sine * MARGIN
+    } else {
+        MARGIN
+    }
 }
 
 /// The per-proposer tables and the per-triple filters, split in two stages so that
@@ -564,6 +591,8 @@ struct Local<'a> {
     t1: &'a [i8],
     t2: &'a [i8],
     t3: &'a [i8],
+    c0: &'a [f32],
+    c0_bound: &'a [f32],
     spacing: &'a [f32],
     cfg: &'a CandidateConfig,
 }
@@ -640,6 +669,12 @@ impl Local<'_> {
             }
         }
         let ord = ord?;
+        // Corner 0's sine and normal filters, tabled (the conjunction's order does not
+        // matter, see `stage2`).
+        let c0 = self.at(ord[3], ord[1]);
+        if self.c0[c0] < 0.0 {
+            return None;
+        }
         let d = self.d;
         let len = [
             d[self.at(ord[0], ord[1])],
@@ -660,7 +695,10 @@ impl Local<'_> {
         }
         let lbar = (len[0] + len[1] + len[2] + len[3]) / 4.0;
         let length_term = cfg.w_length * (lbar / sbar - 1.0);
-        Some(Ordered { ord, local: [a, b, c], length_term })
+        // The base score's own expression with the Jacobian's upper bound: every
+        // operation is monotone, so this is never above `stage2`'s base score.
+        let bound = length_term + cfg.w_shape * (1.0 - self.c0_bound[c0]);
+        Some(Ordered { ord, local: [a, b, c], length_term, bound })
     }
 
     /// The corner sine and normal filters (dropping the triple at the first failed
@@ -765,6 +803,8 @@ fn propose(
     sc.t1.clear();
     sc.t2.clear();
     sc.t3.clear();
+    sc.c0.clear();
+    sc.c0_bound.clear();
     {
         let pos3 = |l: usize| if l == 0 { [0.0f32; 3] } else { sc.rel[l - 1] };
         let pos2 = |l: usize| if l == 0 { [0.0f32; 2] } else { sc.uv[l - 1] };
@@ -777,6 +817,30 @@ fn propose(
                 sc.t1.push(sign(orient2(pos2(x), o, pos2(y))));
                 sc.t2.push(sign(orient2(o, pos2(x), pos2(y))));
                 sc.t3.push(sign(orient2(pos2(x), pos2(y), o)));
+            }
+        }
+        // Corner 0 of the order [0, y, …, x], computed as `Local::stage2` does.
+        for x in 0..w {
+            for y in 0..w {
+                if x == 0 || y == 0 {
+                    sc.c0.push(-1.0);
+                    sc.c0_bound.push(0.0);
+                    continue;
+                }
+                let (ex, ey) = (x * w, y);
+                let cc = cross(sc.e[ex], sc.e[ey]);
+                let cl = norm(cc);
+                let ll = sc.d[ex] * sc.d[ey];
+                let mut cn = [0.0f32; 3];
+                let sine = if ll > 0.0 && cl > 0.0 {
+                    cn = [cc[0] / cl, cc[1] / cl, cc[2] / cl];
+                    (cl / ll).min(1.0)
+                } else {
+                    0.0
+                };
+                let fails = sine < cfg.min_sine || dot(cn, np) <= 0.0;
+                sc.c0.push(if fails { -1.0 } else { sine });
+                sc.c0_bound.push(jacobian_bound(sine, cl, ll));
             }
         }
     }
@@ -812,6 +876,8 @@ fn propose(
         t1: &sc.t1,
         t2: &sc.t2,
         t3: &sc.t3,
+        c0: &sc.c0,
+        c0_bound: &sc.c0_bound,
         spacing,
         cfg,
     };
@@ -825,7 +891,7 @@ fn propose(
             }
         }
     }
-    if lazy && sc.ordered.iter().all(|o| !o.length_term.is_nan()) {
+    if lazy && sc.ordered.iter().all(|o| !o.bound.is_nan()) {
         select_lazy(&loc, points, &sc.ordered, &mut sc.keys, &mut sc.heap, &mut sc.pre, &mut sc.out);
     } else {
         sc.pre.extend(sc.ordered.iter().filter_map(|o| loc.stage2(o)));
@@ -870,9 +936,11 @@ fn select_sorted(loc: &Local<'_>, points: &[[f32; 3]], pre: &mut [Pre], out: &mu
     }
 }
 
-/// The same kept list as [`select_sorted`], computing less: `length_term` is a lower
-/// bound of the base score (the shape term `w_shape · (1 − J)` is ≥ 0), and the base
-/// score one of the full score, so candidates are taken best bound first (from the
+/// The same kept list as [`select_sorted`], computing less: `Ordered::bound` is a lower
+/// bound of the base score (the length term plus the shape term `w_shape · (1 − J)`
+/// with J bounded above by the proposer's corner sine, [`jacobian_bound`]; session 38,
+/// before which the bound was the length term alone), and the base score one of the
+/// full score, so candidates are taken best bound first (from the
 /// bound-sorted list or a heap of evaluated base scores) and nothing is evaluated once
 /// every remaining bound exceeds the worst kept score. Without NaN scores and with no
 /// two candidates of equal (score, coordinates) — the caller checks both — the kept
@@ -888,7 +956,7 @@ fn select_lazy(
 ) {
     let cfg = loc.cfg;
     keys.clear();
-    keys.extend(ordered.iter().enumerate().map(|(j, o)| key_bits(o.length_term) << 32 | j as u64));
+    keys.extend(ordered.iter().enumerate().map(|(j, o)| key_bits(o.bound) << 32 | j as u64));
     // Usually only the best few hundred bounds are visited: sort those first and the
     // rest only if the walk gets there.
     let mut sorted_upto = keys.len();
@@ -918,7 +986,7 @@ fn select_lazy(
         let full = out.len() >= cfg.per_point;
         if take_bound {
             let o = &ordered[(next_bound.unwrap_or(0) & 0xffff_ffff) as usize];
-            if full && o.length_term > out[out.len() - 1].score {
+            if full && o.bound > out[out.len() - 1].score {
                 break;
             }
             li += 1;
@@ -1993,6 +2061,56 @@ mod tests {
             }
             assert!(total > 0, "the reference kept nothing: the comparison would be empty");
         }
+    }
+
+    /// `Local::stage1`'s bound is never above `Local::stage2`'s base score (what the lazy
+    /// selection needs), on clouds from 1e-7 to 1e3 across, where the bound's rounding
+    /// margin and its floors are exercised; and it is tighter than the length term alone
+    /// somewhere (or the check would be empty).
+    #[test]
+    fn stage1_bound_never_exceeds_the_base_score() {
+        let mut rng = crate::rng::Rng::new(29);
+        let (mut checked, mut tighter) = (0usize, 0usize);
+        for &scale in &[1e-7f32, 1e-4, 1.0, 1e3] {
+            let pts: Vec<[f32; 3]> = (0..60)
+                .map(|i| {
+                    let (x, y) = ((i % 8) as f32 * 0.1, (i / 8) as f32 * 0.1);
+                    let z = 0.05 * (4.0 * x).sin() + 0.02 * rng.f32();
+                    [scale * (x + 0.04 * rng.f32()), scale * (y + 0.04 * rng.f32()), scale * z]
+                })
+                .collect();
+            let cfg = CandidateConfig { k: 14, ..CandidateConfig::default() };
+            let c = generate(&pts, &cfg).unwrap();
+            let mut sc = Scratch::default();
+            for i in 0..pts.len() {
+                propose(i, &pts, &c.normals, &c.spacing, &c.knn, &cfg, &mut sc);
+                let loc = Local {
+                    i,
+                    np: c.normals[i],
+                    w: sc.nb.len() + 1,
+                    rel: &sc.rel,
+                    uv: &sc.uv,
+                    nb: &sc.nb,
+                    e: &sc.e,
+                    d: &sc.d,
+                    t1: &sc.t1,
+                    t2: &sc.t2,
+                    t3: &sc.t3,
+                    c0: &sc.c0,
+                    c0_bound: &sc.c0_bound,
+                    spacing: &c.spacing,
+                    cfg: &cfg,
+                };
+                for o in &sc.ordered {
+                    if let Some(pre) = loc.stage2(o) {
+                        assert!(o.bound <= pre.base, "point {i}: bound {} above base {}", o.bound, pre.base);
+                        checked += 1;
+                        tighter += usize::from(o.bound > o.length_term);
+                    }
+                }
+            }
+        }
+        assert!(checked > 1000 && tighter > checked / 2, "{checked} checked, {tighter} tighter");
     }
 
     #[test]

@@ -126,6 +126,9 @@ pub struct CandidateGraph {
     /// The positions, kept for [`RefineInput::Flow`] and [`RefineInput::Inside`] (empty
     /// otherwise).
     pts: Vec<[f32; 3]>,
+    /// Per candidate, the mean length of its four edges (the flow columns' size ratio;
+    /// empty where the input has no flow columns).
+    mean_edge: Vec<f32>,
     /// For [`RefineInput::Inside`], [`inside_points`]: per candidate the points inside
     /// it, as (starts, one more than the candidates; points). Empty otherwise.
     inside: (Vec<u32>, Vec<u32>),
@@ -134,6 +137,22 @@ pub struct CandidateGraph {
     pairs: Groups,
     /// What the graph's [`SideRule`] reads sides from.
     sides: Sides,
+}
+
+/// Candidates per chunk of feature rows (one task of the thread pool).
+const FEATURE_ROWS: usize = 256;
+
+/// What one round's feature rows read beyond their own candidates
+/// (`CandidateGraph::round_context`).
+struct RoundContext {
+    /// Per group of directed edges (`SideRule::Direction` only), [`group_best`].
+    dir_best: Vec<(f32, u32, f32)>,
+    /// Per pair group, [`group_best`].
+    pair: Vec<(f32, u32, f32)>,
+    /// Per point, the summed probability of the candidates at it.
+    mass: Vec<f64>,
+    /// Per point, how many candidates at it are above 0.5.
+    high: Vec<u32>,
 }
 
 /// The per-rule part of a [`CandidateGraph`].
@@ -300,6 +319,12 @@ fn sorted4(mut v: [f32; 4]) -> [f32; 4] {
     v
 }
 
+/// The mean length of quad `q`'s four edges (edge k from corner k to k + 1).
+fn mean_edge(points: &[[f32; 3]], q: [u32; 4]) -> f32 {
+    let p = |v: u32| points[v as usize];
+    (0..4).map(|k| norm3(sub3(p(q[(k + 1) % 4]), p(q[k])))).sum::<f32>() / 4.0
+}
+
 impl CandidateGraph {
     /// Groups `quads` (corners index `points`) for rounds that read sides by `rule`
     /// (only [`SideRule::Normals`] reads the positions).
@@ -380,12 +405,14 @@ impl CandidateGraph {
             }
         };
         let pts = if input.reads_flow() { points.to_vec() } else { Vec::new() };
+        let mean_edge =
+            if input.reads_flow() { crate::par::map(m, |c| mean_edge(points, quads[c])) } else { Vec::new() };
         let inside = if input == RefineInput::Inside {
             inside_points(points, quads, INSIDE_PLANE_TOL, INSIDE_MARGIN)
         } else {
             (Vec::new(), Vec::new())
         };
-        Ok(CandidateGraph { quads: quads.to_vec(), n_points, input, pts, inside, pairs, sides })
+        Ok(CandidateGraph { quads: quads.to_vec(), n_points, input, pts, mean_edge, inside, pairs, sides })
     }
 
     /// Under [`SideRule::Normals`]: the best rival and the best neighbour of candidate
@@ -466,9 +493,7 @@ impl CandidateGraph {
         let (Some(x), Some(y)) = (other(a, b), other(b, a)) else { return (0.0, 0.0) };
         let sa = cosv(sub3(p(a), p(q[(i + 3) % 4])), sub3(p(x), p(a)));
         let sb = cosv(sub3(p(b), p(q[(i + 2) % 4])), sub3(p(y), p(b)));
-        let mean_edge =
-            |qq: [u32; 4]| (0..4).map(|k| norm3(sub3(p(qq[(k + 1) % 4]), p(qq[k])))).sum::<f32>() / 4.0;
-        let (lc, ld) = (mean_edge(q), mean_edge(qd));
+        let (lc, ld) = (self.mean_edge[c], self.mean_edge[d as usize]);
         let ratio = if lc > 0.0 && ld > 0.0 { (ld / lc).ln() } else { 0.0 };
         (sa.min(sb), ratio)
     }
@@ -480,6 +505,19 @@ impl CandidateGraph {
     /// `InvalidInput` when a length differs from the candidate count or a probability
     /// is not a number in [0, 1] (naming the candidate).
     pub fn features(&self, probs: &[f32], base: &[f32]) -> Result<Vec<f32>> {
+        let ctx = self.round_context(probs, base)?;
+        let dim = self.input.dim();
+        let mut out = vec![0.0f32; self.quads.len() * dim];
+        crate::par::for_each_chunk_mut(&mut out, dim * FEATURE_ROWS, |ch, chunk| {
+            self.fill_rows(&ctx, probs, base, ch * FEATURE_ROWS, chunk);
+        });
+        Ok(out)
+    }
+
+    /// What every row of a round reads beyond its own candidate: the checks of
+    /// [`CandidateGraph::features`], the best members of the groups, and the per-point
+    /// probability mass and count above 0.5.
+    fn round_context(&self, probs: &[f32], base: &[f32]) -> Result<RoundContext> {
         let m = self.quads.len();
         if probs.len() != m || base.len() != m {
             return Err(Error::invalid(format!(
@@ -506,70 +544,73 @@ impl CandidateGraph {
                 high[v as usize] += (p > 0.5) as u32;
             }
         }
+        Ok(RoundContext { dir_best, pair, mass, high })
+    }
+
+    /// The feature rows of candidates `first..` into `chunk` (whole rows of
+    /// `self.input.dim()` values; as many as fit).
+    fn fill_rows(&self, ctx: &RoundContext, probs: &[f32], base: &[f32], first: usize, chunk: &mut [f32]) {
+        let RoundContext { dir_best, pair, mass, high } = ctx;
         let dim = self.input.dim();
         let flow = self.input.reads_flow();
         let inside = self.input == RefineInput::Inside;
-        let mut out = vec![0.0f32; m * dim];
-        crate::par::for_each_chunk_mut(&mut out, dim * 256, |ch, chunk| {
-            for (r, row) in chunk.chunks_exact_mut(dim).enumerate() {
-                let c = ch * 256 + r;
-                let (q, p) = (self.quads[c], probs[c]);
-                let me = c as u32;
-                let (mut rival, mut across, mut shared) = ([0.0f32; 4], [0.0f32; 4], [0.0f32; 4]);
-                let (mut at, mut hi) = ([0.0f32; 4], [0.0f32; 4]);
-                let (mut fl, mut sz) = ([0.0f32; 4], [0.0f32; 4]);
-                for i in 0..4 {
-                    let nb;
-                    (rival[i], across[i], nb) = match &self.sides {
-                        Sides::Direction { dir, rev_group } => (
-                            best_other(&dir_best, dir.of_slot[4 * c + i], me),
-                            best_other(&dir_best, rev_group[4 * c + i], me),
-                            NONE,
-                        ),
-                        Sides::Normals(nrm, tags) => self.sides_by_normals(nrm, tags, probs, c, i),
-                    };
-                    if flow && nb != NONE {
-                        let (f, r) = self.flow(c, i, nb);
-                        fl[i] = across[i] * f;
-                        sz[i] = across[i] * r.abs();
-                    }
-                    shared[i] = best_other(&pair, self.pairs.of_slot[6 * c + i], me);
-                    let a = q[i] as usize;
-                    at[i] = (mass[a] - p as f64) as f32;
-                    hi[i] = (high[a] - (p > 0.5) as u32) as f32 / 4.0;
+        for (r, row) in chunk.chunks_exact_mut(dim).enumerate() {
+            let c = first + r;
+            let (q, p) = (self.quads[c], probs[c]);
+            let me = c as u32;
+            let (mut rival, mut across, mut shared) = ([0.0f32; 4], [0.0f32; 4], [0.0f32; 4]);
+            let (mut at, mut hi) = ([0.0f32; 4], [0.0f32; 4]);
+            let (mut fl, mut sz) = ([0.0f32; 4], [0.0f32; 4]);
+            for i in 0..4 {
+                let nb;
+                (rival[i], across[i], nb) = match &self.sides {
+                    Sides::Direction { dir, rev_group } => (
+                        best_other(dir_best, dir.of_slot[4 * c + i], me),
+                        best_other(dir_best, rev_group[4 * c + i], me),
+                        NONE,
+                    ),
+                    Sides::Normals(nrm, tags) => self.sides_by_normals(nrm, tags, probs, c, i),
+                };
+                if flow && nb != NONE {
+                    let (f, r) = self.flow(c, i, nb);
+                    fl[i] = across[i] * f;
+                    sz[i] = across[i] * r.abs();
                 }
-                let diff = [0, 1, 2, 3].map(|i| across[i] - rival[i]);
-                let diag = best_other(&pair, self.pairs.of_slot[6 * c + 4], me).max(best_other(
-                    &pair,
-                    self.pairs.of_slot[6 * c + 5],
-                    me,
-                ));
-                row[0] = logit(p);
-                row[1..5].copy_from_slice(&sorted4(rival));
-                row[5..9].copy_from_slice(&sorted4(across));
-                row[9..13].copy_from_slice(&sorted4(diff));
-                row[13] = diag;
-                row[14..18].copy_from_slice(&sorted4(at));
-                row[18..22].copy_from_slice(&sorted4(hi));
-                row[22..26].copy_from_slice(&sorted4(shared));
-                row[26] = logit(base[c]);
-                if flow {
-                    row[27..31].copy_from_slice(&sorted4(fl));
-                    row[31..35].copy_from_slice(&sorted4(sz));
-                }
-                if inside {
-                    let (start, pts) = &self.inside;
-                    let (mut m_in, mut h_in) = (0.0f64, 0u32);
-                    for &v in &pts[start[c] as usize..start[c + 1] as usize] {
-                        m_in = m_in.max(mass[v as usize]);
-                        h_in = h_in.max(high[v as usize]);
-                    }
-                    row[35] = m_in as f32;
-                    row[36] = h_in as f32 / 4.0;
-                }
+                shared[i] = best_other(pair, self.pairs.of_slot[6 * c + i], me);
+                let a = q[i] as usize;
+                at[i] = (mass[a] - p as f64) as f32;
+                hi[i] = (high[a] - (p > 0.5) as u32) as f32 / 4.0;
             }
-        });
-        Ok(out)
+            let diff = [0, 1, 2, 3].map(|i| across[i] - rival[i]);
+            let diag = best_other(pair, self.pairs.of_slot[6 * c + 4], me).max(best_other(
+                pair,
+                self.pairs.of_slot[6 * c + 5],
+                me,
+            ));
+            row[0] = logit(p);
+            row[1..5].copy_from_slice(&sorted4(rival));
+            row[5..9].copy_from_slice(&sorted4(across));
+            row[9..13].copy_from_slice(&sorted4(diff));
+            row[13] = diag;
+            row[14..18].copy_from_slice(&sorted4(at));
+            row[18..22].copy_from_slice(&sorted4(hi));
+            row[22..26].copy_from_slice(&sorted4(shared));
+            row[26] = logit(base[c]);
+            if flow {
+                row[27..31].copy_from_slice(&sorted4(fl));
+                row[31..35].copy_from_slice(&sorted4(sz));
+            }
+            if inside {
+                let (start, pts) = &self.inside;
+                let (mut m_in, mut h_in) = (0.0f64, 0u32);
+                for &v in &pts[start[c] as usize..start[c + 1] as usize] {
+                    m_in = m_in.max(mass[v as usize]);
+                    h_in = h_in.max(high[v as usize]);
+                }
+                row[35] = m_in as f32;
+                row[36] = h_in as f32 / 4.0;
+            }
+        }
     }
 }
 
@@ -721,6 +762,42 @@ pub fn inside_points(
 /// and `cout`.
 type LayerRef<'a> = (Vec<f32>, Option<&'a [f32]>, usize, usize);
 
+/// One round's MLP for row-by-row inference (`Refiner::round_mlp`).
+struct RoundMlp<'p> {
+    /// The input standardisation: `(x − mean) · scale`.
+    mean: &'p [f32],
+    scale: &'p [f32],
+    layers: Vec<LayerRef<'p>>,
+    /// The widest layer or input: the length of each work buffer.
+    width: usize,
+}
+
+impl RoundMlp<'_> {
+    /// Two work buffers for [`RoundMlp::row`].
+    fn buffers(&self) -> (Vec<f32>, Vec<f32>) {
+        (vec![0.0f32; self.width], vec![0.0f32; self.width])
+    }
+
+    /// The face probability of one feature row (`standardised`: the row went through
+    /// the round's standardisation already).
+    fn row(&self, row: &[f32], standardised: bool, buf: &mut (Vec<f32>, Vec<f32>)) -> f32 {
+        let (x, y) = buf;
+        for (j, &v) in row.iter().enumerate() {
+            x[j] = if standardised { v } else { (v - self.mean[j]) * self.scale[j] };
+        }
+        for (l, (wt, b, cin, cout)) in self.layers.iter().enumerate() {
+            affine_row(wt, *b, &x[..*cin], &mut y[..*cout]);
+            if l + 1 < self.layers.len() {
+                for v in &mut y[..*cout] {
+                    *v = v.max(0.0);
+                }
+            }
+            std::mem::swap(x, y);
+        }
+        crate::pipeline::model::face_probability(x[0], x[1])
+    }
+}
+
 /// `y[..cout] = bias + W x` for one row, with `wt` the weight transposed (`[cin × cout]`,
 /// so that the inner loop runs over contiguous outputs and vectorises). Each output is
 /// summed in input order; inputs that are exactly 0 (ReLU's, about half of them) are
@@ -846,17 +923,33 @@ impl Refiner {
         feats: &[f32],
         standardised: bool,
     ) -> Result<Vec<f32>> {
-        let round = &self.rounds[r];
-        let mean = params.get(round.mean).data();
-        let scale = params.get(round.scale).data();
         let dim = self.input.dim();
+        if feats.len() % dim != 0 {
+            return Err(Error::Shape { op: "refine", msg: "rows or last layer do not fit".into() });
+        }
+        let mlp = self.round_mlp(params, r)?;
+        const ROWS: usize = 512;
+        let mut out = vec![0.0f32; feats.len() / dim];
+        crate::par::for_each_chunk_mut(&mut out, ROWS, |ch, chunk| {
+            let mut buf = mlp.buffers();
+            for (i, o) in chunk.iter_mut().enumerate() {
+                *o = mlp.row(&feats[(ch * ROWS + i) * dim..][..dim], standardised, &mut buf);
+            }
+        });
+        Ok(out)
+    }
+
+    /// Round `r`'s MLP, checked against the input width and ready for rows.
+    fn round_mlp<'p>(&self, params: &'p ParamStore, r: usize) -> Result<RoundMlp<'p>> {
+        let round = &self.rounds[r];
         let fits = round.layers.iter().all(|l| {
             params.get(l.weight).data().len() == l.cin * l.cout
                 && l.bias.map_or(true, |b| params.get(b).data().len() == l.cout)
         });
-        if round.layers.last().map(|l| l.cout) != Some(2) || feats.len() % dim != 0 || !fits {
+        if round.layers.last().map(|l| l.cout) != Some(2) || !fits {
             return Err(Error::Shape { op: "refine", msg: "rows or last layer do not fit".into() });
         }
+        let dim = self.input.dim();
         // Weights transposed once per call (`[cin × cout]`), for [`affine_row`].
         let layers: Vec<LayerRef> = round
             .layers
@@ -868,25 +961,36 @@ impl Refiner {
             })
             .collect();
         let width = layers.iter().map(|l| l.2.max(l.3)).max().unwrap_or(0).max(dim);
-        const ROWS: usize = 512;
-        let mut out = vec![0.0f32; feats.len() / dim];
-        crate::par::for_each_chunk_mut(&mut out, ROWS, |ch, chunk| {
-            let (mut x, mut y) = (vec![0.0f32; width], vec![0.0f32; width]);
-            for (i, o) in chunk.iter_mut().enumerate() {
-                let row = &feats[(ch * ROWS + i) * dim..][..dim];
-                for j in 0..dim {
-                    x[j] = if standardised { row[j] } else { (row[j] - mean[j]) * scale[j] };
-                }
-                for (l, (wt, b, cin, cout)) in layers.iter().enumerate() {
-                    affine_row(wt, *b, &x[..*cin], &mut y[..*cout]);
-                    if l + 1 < layers.len() {
-                        for v in &mut y[..*cout] {
-                            *v = v.max(0.0);
-                        }
-                    }
-                    std::mem::swap(&mut x, &mut y);
-                }
-                *o = crate::pipeline::model::face_probability(x[0], x[1]);
+        Ok(RoundMlp {
+            mean: params.get(round.mean).data(),
+            scale: params.get(round.scale).data(),
+            layers,
+            width,
+        })
+    }
+
+    /// Round `r` on the graph's candidates: each chunk's feature rows are computed and
+    /// scored in turn, so no `[M × dim]` matrix is held (the same probabilities as
+    /// [`CandidateGraph::features`] followed by the round's MLP, bit for bit: the
+    /// same rows, the same arithmetic).
+    fn round_on_graph(
+        &self,
+        params: &ParamStore,
+        r: usize,
+        graph: &CandidateGraph,
+        probs: &[f32],
+        base: &[f32],
+    ) -> Result<Vec<f32>> {
+        let ctx = graph.round_context(probs, base)?;
+        let mlp = self.round_mlp(params, r)?;
+        let dim = graph.input.dim();
+        let mut out = vec![0.0f32; probs.len()];
+        crate::par::for_each_chunk_mut(&mut out, FEATURE_ROWS, |ch, chunk| {
+            let mut feats = vec![0.0f32; chunk.len() * dim];
+            graph.fill_rows(&ctx, probs, base, ch * FEATURE_ROWS, &mut feats);
+            let mut buf = mlp.buffers();
+            for (o, row) in chunk.iter_mut().zip(feats.chunks_exact(dim)) {
+                *o = mlp.row(row, false, &mut buf);
             }
         });
         Ok(out)
@@ -928,8 +1032,7 @@ impl Refiner {
         let graph = CandidateGraph::with_input(quads, points, self.sides, self.input)?;
         let mut p = base.to_vec();
         for r in 0..n {
-            let f = graph.features(&p, base)?;
-            p = self.round_probs(params, r, &f, false)?;
+            p = self.round_on_graph(params, r, &graph, &p, base)?;
         }
         Ok(p)
     }
@@ -1271,5 +1374,59 @@ mod tests {
             previous = Some(got);
         }
         assert_eq!(refiner.apply(&params, &points, &quads, &base).unwrap(), previous.unwrap());
+    }
+
+    /// The rounds as `apply` runs them (each chunk's rows computed and scored in turn,
+    /// no feature matrix) give the probabilities of the plain two steps, the whole
+    /// feature matrix and then the round's MLP, bit for bit, for each input kind and
+    /// more candidates than one chunk holds.
+    #[test]
+    fn chunked_rounds_equal_the_feature_matrix_and_the_mlp() {
+        for (input, seed) in [(RefineInput::Base, 1), (RefineInput::Flow, 2), (RefineInput::Inside, 3)] {
+            let mut params = ParamStore::new();
+            let mut rng = Rng::new(seed);
+            let refiner = Refiner::new(&mut params, 3, &[16, 8], SideRule::Normals, input, &mut rng).unwrap();
+            // A standardisation that is not the identity, so skipping it would show.
+            for round in &refiner.rounds {
+                for v in params.get_mut(round.mean).data_mut() {
+                    *v = rng.uniform(-0.5, 0.5) as f32;
+                }
+                for v in params.get_mut(round.scale).data_mut() {
+                    *v = rng.uniform(0.5, 2.0) as f32;
+                }
+            }
+            let n_points = 200u32;
+            let points: Vec<[f32; 3]> = (0..n_points)
+                .map(|_| {
+                    [
+                        rng.uniform(-1.0, 1.0) as f32,
+                        rng.uniform(-1.0, 1.0) as f32,
+                        rng.uniform(-0.1, 0.1) as f32,
+                    ]
+                })
+                .collect();
+            let mut quads = Vec::new();
+            while quads.len() < 3 * FEATURE_ROWS + 17 {
+                let q = [0; 4].map(|_| rng.below(n_points as usize) as u32);
+                if (0..4).all(|i| (i + 1..4).all(|j| q[i] != q[j])) {
+                    quads.push(q);
+                }
+            }
+            let base: Vec<f32> = quads.iter().map(|_| rng.uniform(0.0, 1.0) as f32).collect();
+            let graph = CandidateGraph::with_input(&quads, &points, SideRule::Normals, input).unwrap();
+            let mut p = base.clone();
+            for r in 0..3 {
+                let want =
+                    refiner.round_probs(&params, r, &graph.features(&p, &base).unwrap(), false).unwrap();
+                let got = refiner.round_on_graph(&params, r, &graph, &p, &base).unwrap();
+                assert_eq!(
+                    got.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                    want.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                    "{input:?} round {r}"
+                );
+                assert_ne!(got, p, "{input:?} round {r} changed nothing: the check could not fail");
+                p = got;
+            }
+        }
     }
 }

@@ -762,6 +762,21 @@ pub fn inside_points(
 /// and `cout`.
 type LayerRef<'a> = (Vec<f32>, Option<&'a [f32]>, usize, usize);
 
+/// [`affine_row`] for `y.len() == N`.
+#[inline]
+fn affine_row_fixed<const N: usize>(wt: &[f32], bias: Option<&[f32]>, x: &[f32], y: &mut [f32]) {
+    let mut acc = [0.0f32; N];
+    if let Some(b) = bias {
+        acc.copy_from_slice(b);
+    }
+    for (xj, col) in x.iter().zip(wt.chunks_exact(N)) {
+        for (yk, wk) in acc.iter_mut().zip(col) {
+            *yk += wk * xj;
+        }
+    }
+    y.copy_from_slice(&acc);
+}
+
 /// One round's MLP for row-by-row inference (`Refiner::round_mlp`).
 struct RoundMlp<'p> {
     /// The input standardisation: `(x − mean) · scale`.
@@ -800,18 +815,30 @@ impl RoundMlp<'_> {
 
 /// `y[..cout] = bias + W x` for one row, with `wt` the weight transposed (`[cin × cout]`,
 /// so that the inner loop runs over contiguous outputs and vectorises). Each output is
-/// summed in input order; inputs that are exactly 0 (ReLU's, about half of them) are
-/// skipped, which changes no sum.
+/// summed in input order, bias first, a product and then a sum per input.
+///
+/// Until session 38 inputs that are exactly 0 (ReLU's, about half of them) were
+/// skipped; the branch cost more than the products it saved. With finite weights the
+/// two give the same values: adding 0 · w = ±0 changes a partial sum only where that
+/// sum is itself ±0, and then only the sign of that zero, which the next layer cannot
+/// see (a ±0 input adds ±0 again) and the final logits' difference cannot either.
+/// `affine_row_equals_the_sum_that_skips_zero_inputs` and the shipped weights' outputs
+/// (byte-identical meshes on `eval/` and the probe) check it.
 fn affine_row(wt: &[f32], bias: Option<&[f32]>, x: &[f32], y: &mut [f32]) {
-    match bias {
-        Some(b) => y.copy_from_slice(b),
-        None => y.fill(0.0),
-    }
-    let cout = y.len();
-    for (xj, col) in x.iter().zip(wt.chunks_exact(cout)) {
-        if *xj != 0.0 {
-            for (yk, wk) in y.iter_mut().zip(col) {
-                *yk += wk * xj;
+    // The widths the shipped rounds use get an accumulator of fixed size, which stays
+    // in registers; the arithmetic is the same, output by output and input by input.
+    match y.len() {
+        32 => affine_row_fixed::<32>(wt, bias, x, y),
+        2 => affine_row_fixed::<2>(wt, bias, x, y),
+        cout => {
+            match bias {
+                Some(b) => y.copy_from_slice(b),
+                None => y.fill(0.0),
+            }
+            for (xj, col) in x.iter().zip(wt.chunks_exact(cout)) {
+                for (yk, wk) in y.iter_mut().zip(col) {
+                    *yk += wk * xj;
+                }
             }
         }
     }
@@ -1374,6 +1401,42 @@ mod tests {
             previous = Some(got);
         }
         assert_eq!(refiner.apply(&params, &points, &quads, &base).unwrap(), previous.unwrap());
+    }
+
+    /// [`affine_row`] (every input, the fixed-width paths included) against the sum that
+    /// skips inputs equal to 0, as it ran before session 38: the same values (equal as
+    /// numbers; a zero may differ only in sign), on rows half of whose inputs are ±0.
+    #[test]
+    fn affine_row_equals_the_sum_that_skips_zero_inputs() {
+        let mut rng = Rng::new(38);
+        let mut nonzero = 0;
+        for &(cin, cout) in &[(35usize, 32usize), (32, 32), (32, 2), (9, 7), (5, 1)] {
+            for trial in 0..50 {
+                let wt: Vec<f32> = (0..cin * cout).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+                let bias: Vec<f32> = (0..cout).map(|_| rng.uniform(-0.5, 0.5) as f32).collect();
+                let x: Vec<f32> = (0..cin)
+                    .map(|_| match rng.below(4) {
+                        0 => 0.0,
+                        1 => -0.0,
+                        _ => rng.uniform(-2.0, 2.0) as f32,
+                    })
+                    .collect();
+                let b = (trial % 2 == 0).then_some(&bias[..]);
+                let mut want = b.map_or(vec![0.0f32; cout], <[f32]>::to_vec);
+                for (xj, col) in x.iter().zip(wt.chunks_exact(cout)) {
+                    if *xj != 0.0 {
+                        for (yk, wk) in want.iter_mut().zip(col) {
+                            *yk += wk * xj;
+                        }
+                    }
+                }
+                let mut got = vec![f32::NAN; cout];
+                affine_row(&wt, b, &x, &mut got);
+                assert_eq!(got, want, "{cin} -> {cout}, trial {trial}");
+                nonzero += got.iter().filter(|v| **v != 0.0).count();
+            }
+        }
+        assert!(nonzero > 1000, "the sums were mostly zero: the check could not fail");
     }
 
     /// The rounds as `apply` runs them (each chunk's rows computed and scored in turn,

@@ -1544,31 +1544,35 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
     orient_normals(points, &normal_table, &mut normals);
     let spacing = local_spacing(points, &knn, cfg.spacing_k);
 
-    // Proposers in fixed chunks, each with its own reused buffers; entries in point
-    // order, then rank order, whatever the thread count.
+    // Proposers in fixed chunks, each with its own reused buffers, writing into its
+    // own slots of one table (`slots` a point: a kept list is never longer); then the
+    // empty slots go, leaving the entries in point order, then rank order, whatever the
+    // thread count. (Until session 38 each chunk collected its entries in a vector of
+    // its own and they were concatenated: the freed chunk vectors stayed in the
+    // allocator's heap while the whole list was copied, twice the memory at the peak.)
     const CHUNK: usize = 64;
-    let chunks: Vec<Vec<Entry>> = crate::par::map(n.div_ceil(CHUNK), |ch| {
+    let triples = cfg.k.min(n.saturating_sub(1));
+    let slots = cfg.per_point.min(triples * triples.saturating_sub(1) * triples.saturating_sub(2) / 6);
+    const EMPTY: Entry = ([u32::MAX; 4], [u32::MAX; 4], 0, 0.0, 0);
+    let mut all: Vec<Entry> = vec![EMPTY; n * slots];
+    crate::par::for_each_chunk_mut(&mut all, (CHUNK * slots).max(1), |ch, table| {
         let mut sc = Scratch::default();
-        let mut entries: Vec<Entry> = Vec::new();
         for i in ch * CHUNK..((ch + 1) * CHUNK).min(n) {
             propose(i, points, &normals, &spacing, &knn, cfg, &mut sc);
-            for (r, kp) in sc.out.iter().enumerate() {
-                entries.push((
+            let row = &mut table[(i - ch * CHUNK) * slots..][..slots];
+            debug_assert!(sc.out.len() <= slots, "a kept list longer than its triples");
+            for (r, (kp, slot)) in sc.out.iter().zip(row).enumerate() {
+                *slot = (
                     vertex_set(&kp.quad),
                     canonical(kp.quad),
                     r.min(u16::MAX as usize) as u16,
                     kp.score,
                     kp.inside,
-                ));
+                );
             }
         }
-        entries
     });
-    // (sorted vertex key, canonical cyclic quad, rank, score, inside)
-    let mut all: Vec<Entry> = Vec::with_capacity(chunks.iter().map(Vec::len).sum());
-    for c in chunks {
-        all.extend(c);
-    }
+    all.retain(|e| e.0 != EMPTY.0);
     // Within a vertex set, the entry with the best (rank, score, orientation) first,
     // so the choice does not depend on the proposer order or thread count.
     all.sort_unstable_by(|x, y| {

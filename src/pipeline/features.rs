@@ -149,6 +149,19 @@ fn edge_key(a: u32, b: u32) -> u64 {
 ///   projecting into the quad near its plane;
 /// * 15: the ranking score (`Candidates::score`, lower is better).
 pub fn context_features(points: &[[f32; 3]], cands: &Candidates) -> Vec<f32> {
+    let edges = sorted_edges(cands);
+    let mut out = vec![0.0f32; cands.quads.len() * CONTEXT_DIM];
+    crate::par::for_each_chunk_mut(&mut out, CONTEXT_DIM * 256, |ci, chunk| {
+        for (r, row) in chunk.chunks_mut(CONTEXT_DIM).enumerate() {
+            context_row(points, cands, &edges, ci * 256 + r, row);
+        }
+    });
+    out
+}
+
+/// Every candidate's four edges as [`edge_key`]s, sorted (what [`context_row`] counts
+/// in).
+fn sorted_edges(cands: &Candidates) -> Vec<u64> {
     let mut edges: Vec<u64> = Vec::with_capacity(cands.quads.len() * 4);
     for q in &cands.quads {
         for i in 0..4 {
@@ -156,23 +169,22 @@ pub fn context_features(points: &[[f32; 3]], cands: &Candidates) -> Vec<f32> {
         }
     }
     edges.sort_unstable();
+    edges
+}
+
+/// The [`context_features`] row of candidate `c` into `row[..CONTEXT_DIM]`, `edges` from
+/// [`sorted_edges`].
+fn context_row(points: &[[f32; 3]], cands: &Candidates, edges: &[u64], c: usize, row: &mut [f32]) {
     let count = |k: u64| edges.partition_point(|&e| e <= k) - edges.partition_point(|&e| e < k);
-    let mut out = vec![0.0f32; cands.quads.len() * CONTEXT_DIM];
-    crate::par::for_each_chunk_mut(&mut out, CONTEXT_DIM * 256, |ci, chunk| {
-        for (r, row) in chunk.chunks_mut(CONTEXT_DIM).enumerate() {
-            let c = ci * 256 + r;
-            let q = cands.quads[c];
-            for i in 0..4 {
-                row[i] = (count(edge_key(q[i], q[(i + 1) % 4])) - 1) as f32;
-            }
-            context_geometry_row(points, &cands.spacing, &cands.normals, q, row);
-            row[4] = cands.rank[c] as f32;
-            row[5] = cands.proposers[c] as f32;
-            row[14] = cands.inside[c] as f32;
-            row[15] = cands.score[c];
-        }
-    });
-    out
+    let q = cands.quads[c];
+    for i in 0..4 {
+        row[i] = (count(edge_key(q[i], q[(i + 1) % 4])) - 1) as f32;
+    }
+    context_geometry_row(points, &cands.spacing, &cands.normals, q, row);
+    row[4] = cands.rank[c] as f32;
+    row[5] = cands.proposers[c] as f32;
+    row[14] = cands.inside[c] as f32;
+    row[15] = cands.score[c];
 }
 
 /// The context columns of quad `q` that depend on the point positions (6–13 of
@@ -205,17 +217,22 @@ pub fn context_geometry_row(
 /// The network input rows for `cands`: F_info, then (if `with_context`) the context
 /// features, `F_INFO_DIM (+ CONTEXT_DIM)` values per candidate.
 pub fn face_input(points: &[[f32; 3]], cands: &Candidates, with_context: bool) -> Vec<f32> {
-    let fi = f_info(points, cands);
     if !with_context {
-        return fi;
+        return f_info(points, cands);
     }
-    let ctx = context_features(points, cands);
-    let m = cands.len();
-    let mut out = Vec::with_capacity(m * (F_INFO_DIM + CONTEXT_DIM));
-    for i in 0..m {
-        out.extend_from_slice(&fi[i * F_INFO_DIM..(i + 1) * F_INFO_DIM]);
-        out.extend_from_slice(&ctx[i * CONTEXT_DIM..(i + 1) * CONTEXT_DIM]);
-    }
+    // Written row by row into the one buffer (no separate F_info and context
+    // matrices: at millions of candidates those were the largest allocations).
+    let edges = sorted_edges(cands);
+    let dim = F_INFO_DIM + CONTEXT_DIM;
+    let mut out = vec![0.0f32; cands.len() * dim];
+    crate::par::for_each_chunk_mut(&mut out, dim * 256, |ci, chunk| {
+        for (r, row) in chunk.chunks_mut(dim).enumerate() {
+            let c = ci * 256 + r;
+            let (fi, ctx) = row.split_at_mut(F_INFO_DIM);
+            f_info_row(points, &cands.spacing, cands.quads[c], fi);
+            context_row(points, cands, &edges, c, ctx);
+        }
+    });
     out
 }
 
@@ -223,6 +240,34 @@ pub fn face_input(points: &[[f32; 3]], cands: &Candidates, with_context: bool) -
 mod tests {
     use super::*;
     use crate::pipeline::candidates::{generate, CandidateConfig};
+
+    /// The network input with context is F_info's row followed by the context row,
+    /// candidate by candidate, bit for bit (it is written in place, not concatenated),
+    /// over more candidates than one chunk of rows.
+    #[test]
+    fn face_input_interleaves_f_info_and_the_context_rows() {
+        let mut rng = crate::rng::Rng::new(5);
+        let pts: Vec<[f32; 3]> = (0..400)
+            .map(|i| {
+                let (x, y) = ((i % 20) as f32, (i / 20) as f32);
+                [x + 0.2 * rng.f32(), y + 0.2 * rng.f32(), 0.3 * (0.5 * x).sin() + 0.05 * rng.f32()]
+            })
+            .collect();
+        let c = generate(&pts, &CandidateConfig::default()).unwrap();
+        assert!(c.len() > 512, "{} candidates: one chunk only", c.len());
+        let (fi, ctx) = (f_info(&pts, &c), context_features(&pts, &c));
+        let want: Vec<u32> = (0..c.len())
+            .flat_map(|i| {
+                fi[i * F_INFO_DIM..(i + 1) * F_INFO_DIM]
+                    .iter()
+                    .chain(&ctx[i * CONTEXT_DIM..(i + 1) * CONTEXT_DIM])
+            })
+            .map(|v| v.to_bits())
+            .collect();
+        let got: Vec<u32> = face_input(&pts, &c, true).iter().map(|v| v.to_bits()).collect();
+        assert_eq!(got, want);
+        assert_eq!(face_input(&pts, &c, false), fi);
+    }
 
     #[test]
     fn square_has_textbook_features() {

@@ -477,21 +477,34 @@ fn score_cloud(
         }
     }
     clock.lap(report, "features");
-    let (mut t_classify, mut t_refine) = (0.0, None);
-    let mut probs: Vec<f32> = Vec::new();
+    // Every member's classifier first, so that the face inputs and the candidates'
+    // side tables (the largest buffers at millions of candidates) are freed before the
+    // refinement rounds build their graph.
+    let mut bases = Vec::with_capacity(models.len());
     for (k, model) in models.iter().enumerate() {
         let x = inputs[model.config().use_context as usize].as_deref().unwrap_or_default();
         // The point encoder (if the model has one) reads the same normalised cloud the
         // candidates were built in, as in training.
         let base = model.predict_base(local, &cands.quads, x)?;
         check_probabilities(k, &base)?;
-        t_classify += clock.split();
+        bases.push(base);
+    }
+    let t_classify = clock.split();
+    drop(inputs);
+    // The rest of `cands` (kNN table, normals, ranks) goes with the block.
+    let quads = {
+        let c = cands;
+        c.quads
+    };
+    let mut t_refine = None;
+    let mut probs: Vec<f32> = Vec::new();
+    for (k, (model, base)) in models.iter().zip(bases).enumerate() {
         // Refinement rounds (when the model has them) rescore every candidate by its
         // rivals and neighbours: the same as `predict_with_points`, timed apart.
         let p = match model.refiner() {
             Some(r) => {
                 let n = cfg.rounds_for(local.len()).unwrap_or(usize::MAX);
-                let p = r.apply_first(&model.params, local, &cands.quads, &base, n)?;
+                let p = r.apply_first(&model.params, local, &quads, &base, n)?;
                 *t_refine.get_or_insert(0.0) += clock.split();
                 check_probabilities(k, &p)?;
                 p
@@ -512,7 +525,7 @@ fn score_cloud(
     if let Some(t) = t_refine {
         clock.record(report, "refine", t);
     }
-    Ok((cands.quads, probs))
+    Ok((quads, probs))
 }
 
 /// Candidates above the threshold and their probabilities, then the rest and theirs.

@@ -235,25 +235,34 @@ struct Groups {
 }
 
 impl Groups {
-    fn new(n: usize, entries: &[(u32, u32, u32)], per: u32) -> Groups {
+    /// The groups of `entries()`'s (a, b, slot) triples (each slot once, slots below
+    /// `len`), with member `slot / per`. `entries` is called twice (a count, then a
+    /// fill) rather than collected: at millions of candidates the list would be the
+    /// largest buffer of the graph.
+    fn new<I: Iterator<Item = (u32, u32, u32)>>(
+        n: usize,
+        len: usize,
+        entries: impl Fn() -> I,
+        per: u32,
+    ) -> Groups {
         let mut offs = vec![0u32; n + 1];
-        for &(a, _, _) in entries {
+        for (a, _, _) in entries() {
             offs[a as usize + 1] += 1;
         }
         for i in 0..n {
             offs[i + 1] += offs[i];
         }
         let mut cursor = offs.clone();
-        let mut sorted = vec![(0u32, 0u32); entries.len()];
-        for &(a, b, slot) in entries {
+        let mut sorted = vec![(0u32, 0u32); len];
+        for (a, b, slot) in entries() {
             let c = &mut cursor[a as usize];
             sorted[*c as usize] = (b, slot);
             *c += 1;
         }
-        let mut members = Vec::with_capacity(entries.len());
+        let mut members = Vec::with_capacity(len);
         let mut start = Vec::new();
         let mut second = Vec::new();
-        let mut of_slot = vec![0u32; entries.len()];
+        let mut of_slot = vec![0u32; len];
         let mut by_first = Vec::with_capacity(n + 1);
         for a in 0..n {
             by_first.push(start.len() as u32);
@@ -363,32 +372,36 @@ impl CandidateGraph {
         if m >= (1 << 29) {
             return Err(Error::invalid("refine: more than 2^29 candidates"));
         }
-        let mut dir = Vec::with_capacity(4 * m);
-        let mut pairs = Vec::with_capacity(6 * m);
-        for (c, q) in quads.iter().enumerate() {
-            let c = c as u32;
-            let lo_hi = |a: u32, b: u32| if a < b { (a, b) } else { (b, a) };
-            for i in 0..4 {
-                let (a, b) = (q[i], q[(i + 1) % 4]);
-                dir.push((a, b, 4 * c + i as u32));
-                let (lo, hi) = lo_hi(a, b);
-                pairs.push((lo, hi, 6 * c + i as u32));
-            }
-            let (lo, hi) = lo_hi(q[0], q[2]);
-            pairs.push((lo, hi, 6 * c + 4));
-            let (lo, hi) = lo_hi(q[1], q[3]);
-            pairs.push((lo, hi, 6 * c + 5));
-        }
+        // Directed edges (a, b, 4·c + i) and unordered pairs (lo, hi, 6·c + j): edges
+        // 0–3, then the diagonals (q0, q2), (q1, q3).
+        let directed = || {
+            quads
+                .iter()
+                .zip(0u32..)
+                .flat_map(|(q, c)| (0..4).map(move |i| (q[i], q[(i + 1) % 4], 4 * c + i as u32)))
+        };
+        let unordered = || {
+            quads.iter().zip(0u32..).flat_map(|(q, c)| {
+                let ends =
+                    [(q[0], q[1]), (q[1], q[2]), (q[2], q[3]), (q[3], q[0]), (q[0], q[2]), (q[1], q[3])];
+                (0..6).map(move |j| {
+                    let (a, b) = ends[j];
+                    (a.min(b), a.max(b), 6 * c + j as u32)
+                })
+            })
+        };
         let (sides, pairs) = match rule {
             SideRule::Direction => {
-                let (dir, pairs) =
-                    crate::par::join(|| Groups::new(n_points, &dir, 4), || Groups::new(n_points, &pairs, 6));
+                let (dir, pairs) = crate::par::join(
+                    || Groups::new(n_points, 4 * m, directed, 4),
+                    || Groups::new(n_points, 6 * m, unordered, 6),
+                );
                 let rev_group =
                     quads.iter().flat_map(|q| (0..4).map(|i| dir.find(q[(i + 1) % 4], q[i]))).collect();
                 (Sides::Direction { dir, rev_group }, pairs)
             }
             SideRule::Normals => {
-                let pairs = Groups::new(n_points, &pairs, 6);
+                let pairs = Groups::new(n_points, 6 * m, unordered, 6);
                 // Which of member d's pairs group g is: the slot of d that maps to g.
                 let mut tags = Vec::with_capacity(pairs.members.len());
                 for g in 0..pairs.start.len() - 1 {

@@ -88,6 +88,8 @@ bench:
 	$(CARGO) bench --bench train_step
 	$(CARGO) bench --bench reconstruct
 	$(CARGO) bench --bench io_parse
+	@echo "reconstruct_large: one million points, about a minute or two on two cores"
+	$(CARGO) bench --bench reconstruct_large
 
 # The full candidate-coverage measurement (all train meshes, clean and noisy, plus the
 # synthetic shapes); make test runs the same test on a subset of the train meshes.

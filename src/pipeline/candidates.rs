@@ -493,14 +493,14 @@ fn coord_order(points: &[[f32; 3]], a: &[u32; 4], b: &[u32; 4]) -> std::cmp::Ord
         .unwrap_or(std::cmp::Ordering::Equal)
 }
 
-/// Per-thread buffers of [`propose`], reused from one proposer to the next.
+/// One proposer's per-neighbour and per-pair tables (what `Local` reads).
 ///
 /// The per-pair tables are over local ids (0 = the proposer, 1 + j = neighbour j),
 /// row-major with `w = m + 1` columns. Every entry is computed with exactly the
 /// expression the per-triple code used before it was tabled (same operands, same
 /// order), so the filters see bit-identical values.
 #[derive(Default)]
-struct Scratch {
+struct Tables {
     nb: Vec<u32>,
     rel: Vec<[f32; 3]>,
     uv: Vec<[f32; 2]>,
@@ -518,6 +518,12 @@ struct Scratch {
     c0: Vec<f32>,
     /// `c0_bound[x·w + y]`: [`jacobian_bound`] of that corner.
     c0_bound: Vec<f32>,
+}
+
+/// Per-thread buffers of [`propose`], reused from one proposer to the next.
+#[derive(Default)]
+struct Scratch {
+    tab: Tables,
     /// Triples past `Local::stage1`.
     ordered: Vec<Ordered>,
     pre: Vec<Pre>,
@@ -583,16 +589,7 @@ struct Local<'a> {
     i: usize,
     np: [f32; 3],
     w: usize,
-    rel: &'a [[f32; 3]],
-    uv: &'a [[f32; 2]],
-    nb: &'a [u32],
-    e: &'a [[f32; 3]],
-    d: &'a [f32],
-    t1: &'a [i8],
-    t2: &'a [i8],
-    t3: &'a [i8],
-    c0: &'a [f32],
-    c0_bound: &'a [f32],
+    tab: &'a Tables,
     spacing: &'a [f32],
     cfg: &'a CandidateConfig,
 }
@@ -603,7 +600,7 @@ impl Local<'_> {
         if l == 0 {
             [0.0; 2]
         } else {
-            self.uv[l - 1]
+            self.tab.uv[l - 1]
         }
     }
     #[inline]
@@ -611,7 +608,7 @@ impl Local<'_> {
         if l == 0 {
             [0.0; 3]
         } else {
-            self.rel[l - 1]
+            self.tab.rel[l - 1]
         }
     }
     #[inline]
@@ -619,7 +616,7 @@ impl Local<'_> {
         if l == 0 {
             self.i as u32
         } else {
-            self.nb[l - 1]
+            self.tab.nb[l - 1]
         }
     }
     #[inline]
@@ -636,7 +633,7 @@ impl Local<'_> {
     /// runs only when they agree.
     #[inline]
     fn stage1(&self, a: usize, b: usize, c: usize) -> Option<Ordered> {
-        let (t1, t2, t3) = (self.t1, self.t2, self.t3);
+        let (t1, t2, t3) = (&self.tab.t1, &self.tab.t2, &self.tab.t3);
         let mut ord = None;
         let mut oabc = None;
         let s = t1[self.at(c, a)];
@@ -672,10 +669,10 @@ impl Local<'_> {
         // Corner 0's sine and normal filters, tabled (the conjunction's order does not
         // matter, see `stage2`).
         let c0 = self.at(ord[3], ord[1]);
-        if self.c0[c0] < 0.0 {
+        if self.tab.c0[c0] < 0.0 {
             return None;
         }
-        let d = self.d;
+        let d = &self.tab.d;
         let len = [
             d[self.at(ord[0], ord[1])],
             d[self.at(ord[1], ord[2])],
@@ -697,7 +694,7 @@ impl Local<'_> {
         let length_term = cfg.w_length * (lbar / sbar - 1.0);
         // The base score's own expression with the Jacobian's upper bound: every
         // operation is monotone, so this is never above `stage2`'s base score.
-        let bound = length_term + cfg.w_shape * (1.0 - self.c0_bound[c0]);
+        let bound = length_term + cfg.w_shape * (1.0 - self.tab.c0_bound[c0]);
         Some(Ordered { ord, local: [a, b, c], length_term, bound })
     }
 
@@ -706,7 +703,7 @@ impl Local<'_> {
     /// the diagonal normal, the Jacobian and the base score, as [`quad_geom`].
     #[inline]
     fn stage2(&self, o: &Ordered) -> Option<Pre> {
-        let (ord, cfg, e, d) = (o.ord, self.cfg, self.e, self.d);
+        let (ord, cfg, e, d) = (o.ord, self.cfg, &self.tab.e, &self.tab.d);
         let eid = [
             self.at(ord[0], ord[1]),
             self.at(ord[1], ord[2]),
@@ -788,49 +785,49 @@ fn propose(
     let p = points[i];
     let np = normals[i];
     let (tu, tv) = tangent_basis(np);
-    sc.nb.clear();
-    sc.nb.extend(neighbours(knn, n, i, cfg.k));
-    sc.rel.clear();
-    sc.rel.extend(sc.nb.iter().map(|&j| sub(points[j as usize], p)));
-    sc.uv.clear();
-    sc.uv.extend(sc.rel.iter().map(|r| [dot(*r, tu), dot(*r, tv)]));
-    let m = sc.nb.len();
+    sc.tab.nb.clear();
+    sc.tab.nb.extend(neighbours(knn, n, i, cfg.k));
+    sc.tab.rel.clear();
+    sc.tab.rel.extend(sc.tab.nb.iter().map(|&j| sub(points[j as usize], p)));
+    sc.tab.uv.clear();
+    sc.tab.uv.extend(sc.tab.rel.iter().map(|r| [dot(*r, tu), dot(*r, tv)]));
+    let m = sc.tab.nb.len();
     let w = m + 1;
     sc.pre.clear();
     sc.out.clear();
-    sc.e.clear();
-    sc.d.clear();
-    sc.t1.clear();
-    sc.t2.clear();
-    sc.t3.clear();
-    sc.c0.clear();
-    sc.c0_bound.clear();
+    sc.tab.e.clear();
+    sc.tab.d.clear();
+    sc.tab.t1.clear();
+    sc.tab.t2.clear();
+    sc.tab.t3.clear();
+    sc.tab.c0.clear();
+    sc.tab.c0_bound.clear();
     {
-        let pos3 = |l: usize| if l == 0 { [0.0f32; 3] } else { sc.rel[l - 1] };
-        let pos2 = |l: usize| if l == 0 { [0.0f32; 2] } else { sc.uv[l - 1] };
+        let pos3 = |l: usize| if l == 0 { [0.0f32; 3] } else { sc.tab.rel[l - 1] };
+        let pos2 = |l: usize| if l == 0 { [0.0f32; 2] } else { sc.tab.uv[l - 1] };
         let o = [0.0f32; 2];
         for x in 0..w {
             for y in 0..w {
                 let ev = sub(pos3(y), pos3(x));
-                sc.e.push(ev);
-                sc.d.push(norm(ev));
-                sc.t1.push(sign(orient2(pos2(x), o, pos2(y))));
-                sc.t2.push(sign(orient2(o, pos2(x), pos2(y))));
-                sc.t3.push(sign(orient2(pos2(x), pos2(y), o)));
+                sc.tab.e.push(ev);
+                sc.tab.d.push(norm(ev));
+                sc.tab.t1.push(sign(orient2(pos2(x), o, pos2(y))));
+                sc.tab.t2.push(sign(orient2(o, pos2(x), pos2(y))));
+                sc.tab.t3.push(sign(orient2(pos2(x), pos2(y), o)));
             }
         }
         // Corner 0 of the order [0, y, …, x], computed as `Local::stage2` does.
         for x in 0..w {
             for y in 0..w {
                 if x == 0 || y == 0 {
-                    sc.c0.push(-1.0);
-                    sc.c0_bound.push(0.0);
+                    sc.tab.c0.push(-1.0);
+                    sc.tab.c0_bound.push(0.0);
                     continue;
                 }
                 let (ex, ey) = (x * w, y);
-                let cc = cross(sc.e[ex], sc.e[ey]);
+                let cc = cross(sc.tab.e[ex], sc.tab.e[ey]);
                 let cl = norm(cc);
-                let ll = sc.d[ex] * sc.d[ey];
+                let ll = sc.tab.d[ex] * sc.tab.d[ey];
                 let mut cn = [0.0f32; 3];
                 let sine = if ll > 0.0 && cl > 0.0 {
                     cn = [cc[0] / cl, cc[1] / cl, cc[2] / cl];
@@ -839,24 +836,24 @@ fn propose(
                     0.0
                 };
                 let fails = sine < cfg.min_sine || dot(cn, np) <= 0.0;
-                sc.c0.push(if fails { -1.0 } else { sine });
-                sc.c0_bound.push(jacobian_bound(sine, cl, ll));
+                sc.tab.c0.push(if fails { -1.0 } else { sine });
+                sc.tab.c0_bound.push(jacobian_bound(sine, cl, ll));
             }
         }
     }
     // The lazy selection relies on a strict candidate order and on scores that are
     // never NaN: no two bit-identical points here, coordinates small enough that no
     // product overflows (the normalised frame has |x| ≤ 2), finite weights.
-    let bounded = sc.rel.iter().all(|r| r.iter().all(|x| x.abs() <= 1e9));
+    let bounded = sc.tab.rel.iter().all(|r| r.iter().all(|x| x.abs() <= 1e9));
     let weights_ok = cfg.w_shape.is_finite()
         && cfg.w_shape >= 0.0
         && cfg.w_inside_first.is_finite()
         && cfg.w_inside.is_finite();
     let distinct = || {
         for x in 0..w {
-            let px = if x == 0 { p } else { points[sc.nb[x - 1] as usize] };
+            let px = if x == 0 { p } else { points[sc.tab.nb[x - 1] as usize] };
             for y in x + 1..w {
-                if px.map(f32::to_bits) == points[sc.nb[y - 1] as usize].map(f32::to_bits) {
+                if px.map(f32::to_bits) == points[sc.tab.nb[y - 1] as usize].map(f32::to_bits) {
                     return false;
                 }
             }
@@ -864,23 +861,7 @@ fn propose(
         true
     };
     let lazy = bounded && weights_ok && distinct();
-    let loc = Local {
-        i,
-        np,
-        w,
-        rel: &sc.rel,
-        uv: &sc.uv,
-        nb: &sc.nb,
-        e: &sc.e,
-        d: &sc.d,
-        t1: &sc.t1,
-        t2: &sc.t2,
-        t3: &sc.t3,
-        c0: &sc.c0,
-        c0_bound: &sc.c0_bound,
-        spacing,
-        cfg,
-    };
+    let loc = Local { i, np, w, tab: &sc.tab, spacing, cfg };
     sc.ordered.clear();
     for a in 1..=m {
         for b in a + 1..=m {
@@ -927,7 +908,7 @@ fn select_sorted(loc: &Local<'_>, points: &[[f32; 3]], pre: &mut [Pre], out: &mu
         if out.len() >= cfg.per_point && c.base > out[out.len() - 1].score {
             break;
         }
-        let inside = inside_count(c, loc.rel, cfg);
+        let inside = inside_count(c, &loc.tab.rel, cfg);
         let score = with_inside(c.base, inside, cfg);
         if out.len() >= cfg.per_point && score > out[out.len() - 1].score {
             continue;
@@ -1000,7 +981,7 @@ fn select_lazy(
             if full && c.base > out[out.len() - 1].score {
                 break;
             }
-            let inside = inside_count(c, loc.rel, cfg);
+            let inside = inside_count(c, &loc.tab.rel, cfg);
             let score = with_inside(c.base, inside, cfg);
             if full && score > out[out.len() - 1].score {
                 continue;
@@ -2091,17 +2072,8 @@ mod tests {
                 let loc = Local {
                     i,
                     np: c.normals[i],
-                    w: sc.nb.len() + 1,
-                    rel: &sc.rel,
-                    uv: &sc.uv,
-                    nb: &sc.nb,
-                    e: &sc.e,
-                    d: &sc.d,
-                    t1: &sc.t1,
-                    t2: &sc.t2,
-                    t3: &sc.t3,
-                    c0: &sc.c0,
-                    c0_bound: &sc.c0_bound,
+                    w: sc.tab.nb.len() + 1,
+                    tab: &sc.tab,
                     spacing: &c.spacing,
                     cfg: &cfg,
                 };

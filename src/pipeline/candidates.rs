@@ -1504,6 +1504,80 @@ fn append_beyond(added: Vec<([u32; 4], f32, u16)>, beyond: u16, cols: Columns<'_
     }
 }
 
+/// Entries of [`proposals`]' slot table at most (about 1.3 GB): one table for clouds up to
+/// a million points at the default budget, batches of points beyond that or with a larger
+/// `per_point`.
+const PROPOSAL_TABLE_ENTRIES: usize = 1 << 25;
+
+/// Every point's kept list (`propose`) as entries, in point order, then rank order,
+/// whatever the thread count.
+///
+/// Proposers run in fixed chunks, each with its own reused buffers, writing into its own
+/// slots of one table (`slots` a point, `min(per_point, C(k, 3))`: a kept list is never
+/// longer); the empty slots are then dropped. Points go in batches so that the table
+/// holds at most `table_entries` entries; with one batch the table itself is compacted
+/// and returned. (Until session 38 each chunk of 64 proposers collected its entries in a
+/// vector of its own and they were concatenated: the freed chunk vectors stayed in the
+/// allocator's heap while the whole list was copied, twice the memory at the peak.)
+fn proposals(
+    points: &[[f32; 3]],
+    normals: &[[f32; 3]],
+    spacing: &[f32],
+    knn: &KnnTable,
+    cfg: &CandidateConfig,
+    table_entries: usize,
+) -> Vec<Entry> {
+    const CHUNK: usize = 64;
+    const EMPTY: Entry = ([u32::MAX; 4], [u32::MAX; 4], 0, 0.0, 0);
+    let n = points.len();
+    let triples = cfg.k.min(n.saturating_sub(1));
+    let slots = cfg.per_point.min(triples * triples.saturating_sub(1) * triples.saturating_sub(2) / 6);
+    if slots == 0 || n == 0 {
+        return Vec::new();
+    }
+    let batch = (table_entries / slots / CHUNK).max(1) * CHUNK;
+    let mut table: Vec<Entry> = vec![EMPTY; batch.min(n) * slots];
+    let mut parts: Vec<Vec<Entry>> = Vec::new();
+    for b0 in (0..n).step_by(batch) {
+        let bn = (n - b0).min(batch);
+        let t = &mut table[..bn * slots];
+        if b0 > 0 {
+            t.fill(EMPTY);
+        }
+        crate::par::for_each_chunk_mut(t, CHUNK * slots, |ch, rows| {
+            let mut sc = Scratch::default();
+            for j in ch * CHUNK..((ch + 1) * CHUNK).min(bn) {
+                propose(b0 + j, points, normals, spacing, knn, cfg, &mut sc);
+                let row = &mut rows[(j - ch * CHUNK) * slots..][..slots];
+                debug_assert!(sc.out.len() <= slots, "a kept list longer than its triples");
+                for (r, (kp, slot)) in sc.out.iter().zip(row).enumerate() {
+                    *slot = (
+                        vertex_set(&kp.quad),
+                        canonical(kp.quad),
+                        r.min(u16::MAX as usize) as u16,
+                        kp.score,
+                        kp.inside,
+                    );
+                }
+            }
+        });
+        if bn == n {
+            table.retain(|e| e.0 != EMPTY.0);
+            return table;
+        }
+        let kept = t.iter().filter(|e| e.0 != EMPTY.0).count();
+        let mut part = Vec::with_capacity(kept);
+        part.extend(t.iter().filter(|e| e.0 != EMPTY.0));
+        parts.push(part);
+    }
+    drop(table);
+    let mut all = Vec::with_capacity(parts.iter().map(Vec::len).sum());
+    for part in parts {
+        all.extend(part);
+    }
+    all
+}
+
 /// Generates the candidate quads of a cloud (in the normalised frame, though any
 /// scale works: everything is relative to the local spacing).
 ///
@@ -1525,35 +1599,7 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
     orient_normals(points, &normal_table, &mut normals);
     let spacing = local_spacing(points, &knn, cfg.spacing_k);
 
-    // Proposers in fixed chunks, each with its own reused buffers, writing into its
-    // own slots of one table (`slots` a point: a kept list is never longer); then the
-    // empty slots go, leaving the entries in point order, then rank order, whatever the
-    // thread count. (Until session 38 each chunk collected its entries in a vector of
-    // its own and they were concatenated: the freed chunk vectors stayed in the
-    // allocator's heap while the whole list was copied, twice the memory at the peak.)
-    const CHUNK: usize = 64;
-    let triples = cfg.k.min(n.saturating_sub(1));
-    let slots = cfg.per_point.min(triples * triples.saturating_sub(1) * triples.saturating_sub(2) / 6);
-    const EMPTY: Entry = ([u32::MAX; 4], [u32::MAX; 4], 0, 0.0, 0);
-    let mut all: Vec<Entry> = vec![EMPTY; n * slots];
-    crate::par::for_each_chunk_mut(&mut all, (CHUNK * slots).max(1), |ch, table| {
-        let mut sc = Scratch::default();
-        for i in ch * CHUNK..((ch + 1) * CHUNK).min(n) {
-            propose(i, points, &normals, &spacing, &knn, cfg, &mut sc);
-            let row = &mut table[(i - ch * CHUNK) * slots..][..slots];
-            debug_assert!(sc.out.len() <= slots, "a kept list longer than its triples");
-            for (r, (kp, slot)) in sc.out.iter().zip(row).enumerate() {
-                *slot = (
-                    vertex_set(&kp.quad),
-                    canonical(kp.quad),
-                    r.min(u16::MAX as usize) as u16,
-                    kp.score,
-                    kp.inside,
-                );
-            }
-        }
-    });
-    all.retain(|e| e.0 != EMPTY.0);
+    let mut all = proposals(points, &normals, &spacing, &knn, cfg, PROPOSAL_TABLE_ENTRIES);
     // Within a vertex set, the entry with the best (rank, score, orientation) first,
     // so the choice does not depend on the proposer order or thread count.
     all.sort_unstable_by(|x, y| {
@@ -1577,6 +1623,9 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
         inside.push(all[s].4);
         s = e;
     }
+    // The slot table (`n · slots` entries, the stage's largest buffer) is not needed
+    // past this point.
+    drop(all);
     // The steps after the proposal rank from one corner as it would; what they add
     // stands beyond every proposer's budget, proposed by none of the corners' lists.
     let cloud = Cloud { points, normals: &normals, spacing: &spacing, knn: &knn, cfg };
@@ -2087,6 +2136,35 @@ mod tests {
             }
         }
         assert!(checked > 1000 && tighter > checked / 2, "{checked} checked, {tighter} tighter");
+    }
+
+    /// The proposals in batches (a slot table too small for the cloud: many batches and a
+    /// short last one) are the proposals of one table, entry for entry, and those are every
+    /// point's kept list in point order, then rank order.
+    #[test]
+    fn proposals_in_batches_equal_one_table() {
+        let pts = grid(23, 17, 0.2);
+        for per_point in [32, 5] {
+            let cfg = CandidateConfig { per_point, ..CandidateConfig::default() };
+            let c = generate(&pts, &cfg).unwrap();
+            let one = proposals(&pts, &c.normals, &c.spacing, &c.knn, &cfg, usize::MAX);
+            let mut want = Vec::new();
+            let mut sc = Scratch::default();
+            for i in 0..pts.len() {
+                propose(i, &pts, &c.normals, &c.spacing, &c.knn, &cfg, &mut sc);
+                want.extend(sc.out.iter().enumerate().map(|(r, kp)| {
+                    (vertex_set(&kp.quad), canonical(kp.quad), r as u16, kp.score.to_bits(), kp.inside)
+                }));
+            }
+            let bits =
+                |v: &[Entry]| v.iter().map(|e| (e.0, e.1, e.2, e.3.to_bits(), e.4)).collect::<Vec<_>>();
+            assert_eq!(bits(&one), want, "per_point {per_point}");
+            // 64 points a batch at most: 391 points in 7 batches, the last of 7 points.
+            for entries in [1, 64 * per_point, 100 * per_point] {
+                let batched = proposals(&pts, &c.normals, &c.spacing, &c.knn, &cfg, entries);
+                assert_eq!(bits(&batched), want, "per_point {per_point}, table of {entries}");
+            }
+        }
     }
 
     #[test]

@@ -217,23 +217,68 @@ pub fn context_geometry_row(
 /// The network input rows for `cands`: F_info, then (if `with_context`) the context
 /// features, `F_INFO_DIM (+ CONTEXT_DIM)` values per candidate.
 pub fn face_input(points: &[[f32; 3]], cands: &Candidates, with_context: bool) -> Vec<f32> {
-    if !with_context {
-        return f_info(points, cands);
-    }
-    // Written row by row into the one buffer (no separate F_info and context
-    // matrices: at millions of candidates those were the largest allocations).
-    let edges = sorted_edges(cands);
-    let dim = F_INFO_DIM + CONTEXT_DIM;
+    let rows = FaceRows::new(points, cands, with_context);
+    let dim = rows.dim();
     let mut out = vec![0.0f32; cands.len() * dim];
     crate::par::for_each_chunk_mut(&mut out, dim * 256, |ci, chunk| {
         for (r, row) in chunk.chunks_mut(dim).enumerate() {
-            let c = ci * 256 + r;
-            let (fi, ctx) = row.split_at_mut(F_INFO_DIM);
-            f_info_row(points, &cands.spacing, cands.quads[c], fi);
-            context_row(points, cands, &edges, c, ctx);
+            rows.fill(ci * 256 + r, row);
         }
     });
     out
+}
+
+/// The rows of [`face_input`] one candidate at a time, for a caller that needs only some
+/// of them at once (`reconstruct` scores the candidates in chunks and makes each
+/// chunk's rows as it goes: at millions of candidates the whole matrix was the
+/// largest buffer of the run).
+pub struct FaceRows<'a> {
+    points: &'a [[f32; 3]],
+    cands: &'a Candidates,
+    /// [`sorted_edges`] with context, empty without.
+    edges: Vec<u64>,
+    with_context: bool,
+}
+
+impl<'a> FaceRows<'a> {
+    /// The rows of `cands`' candidates (corners indexing `points`), with the context
+    /// columns when `with_context`.
+    pub fn new(points: &'a [[f32; 3]], cands: &'a Candidates, with_context: bool) -> FaceRows<'a> {
+        let edges = if with_context { sorted_edges(cands) } else { Vec::new() };
+        FaceRows { points, cands, edges, with_context }
+    }
+
+    /// Values per row: `F_INFO_DIM`, plus `CONTEXT_DIM` with context.
+    pub fn dim(&self) -> usize {
+        F_INFO_DIM + if self.with_context { CONTEXT_DIM } else { 0 }
+    }
+
+    /// Number of rows (candidates).
+    pub fn len(&self) -> usize {
+        self.cands.len()
+    }
+
+    /// Whether there are no rows.
+    pub fn is_empty(&self) -> bool {
+        self.cands.is_empty()
+    }
+
+    /// The candidates the rows describe, in row order.
+    pub fn quads(&self) -> &[[u32; 4]] {
+        &self.cands.quads
+    }
+
+    /// Candidate `c`'s row into `row[..self.dim()]`.
+    ///
+    /// # Panics
+    /// If `c` is not a candidate or `row` is shorter than [`FaceRows::dim`].
+    pub fn fill(&self, c: usize, row: &mut [f32]) {
+        let (fi, ctx) = row.split_at_mut(F_INFO_DIM);
+        f_info_row(self.points, &self.cands.spacing, self.cands.quads[c], fi);
+        if self.with_context {
+            context_row(self.points, self.cands, &self.edges, c, ctx);
+        }
+    }
 }
 
 #[cfg(test)]

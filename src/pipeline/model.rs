@@ -21,6 +21,7 @@ use crate::nn::checkpoint::{self, Checkpoint, TrainState};
 use crate::nn::conv1d::{Conv1d, ConvBnAct};
 use crate::nn::kpfcnn::{prepare, BlockKind, InputFeatures, Kpfcnn, KpfcnnConfig};
 use crate::nn::module::{Module, ResidualBlock};
+use crate::pipeline::features::FaceRows;
 use crate::pipeline::refine::{RefineInput, Refiner, SideRule};
 use crate::rng::Rng;
 use crate::spatial::neighborhoods::NeighborCap;
@@ -628,7 +629,7 @@ impl Model {
     /// activations instead of every candidate's (a 200,000-point cloud has 1.6M
     /// candidates). A [`ModelConfig::cloud_batch_stats`] model: see [`Model::score_rows`].
     fn classify_in_chunks(&self, face_features: &[f32], chunk: usize) -> Result<Vec<f32>> {
-        self.score_rows(face_features, None, chunk, CLOUD_STATS_ROWS)
+        self.score_rows(&InputRows::Matrix(face_features), None, chunk, CLOUD_STATS_ROWS)
     }
 
     /// The classifier's probabilities for the rows of `face_features`; with `points`,
@@ -643,12 +644,12 @@ impl Model {
     /// step: its statistics were samples too.)
     fn score_rows(
         &self,
-        face_features: &[f32],
+        input: &InputRows<'_>,
         points: Option<(&[f32], &[[u32; 4]])>,
         chunk: usize,
         stats_rows: usize,
     ) -> Result<Vec<f32>> {
-        let m = self.rows(face_features)?;
+        let m = self.input_rows(input)?;
         let stats_rows = stats_rows.max(2);
         let fin = self.net.config.face_in();
         let cloud = self.net.config.cloud_batch_stats;
@@ -656,8 +657,7 @@ impl Model {
         let sampled;
         let params = if cloud && !one_batch {
             let pick: Vec<usize> = even_spread(m, stats_rows).collect();
-            let rows: Vec<f32> =
-                pick.iter().flat_map(|&i| face_features[i * fin..(i + 1) * fin].iter().copied()).collect();
+            let rows = input.gather(&pick, fin);
             let corners: Option<Vec<[u32; 4]>> = points.map(|(_, c)| pick.iter().map(|&i| c[i]).collect());
             let mut g = Graph::eval_shared(&self.params).with_batch_stats(true).capturing_stats();
             self.logits(&mut g, rows, points.map(|p| p.0).zip(corners.as_deref()))?;
@@ -673,14 +673,30 @@ impl Model {
         };
         let chunk = if one_batch { m } else { chunk }.max(1);
         let mut out = Vec::with_capacity(m);
-        for (c, rows) in face_features.chunks(chunk.saturating_mul(fin)).enumerate() {
-            let lo = c * chunk;
-            let corners = points.map(|(proj, cs)| (proj, &cs[lo..lo + rows.len() / fin]));
+        for lo in (0..m).step_by(chunk) {
+            let hi = (lo + chunk).min(m);
+            let corners = points.map(|(proj, cs)| (proj, &cs[lo..hi]));
             let mut g = Graph::eval_shared(params).with_batch_stats(one_batch);
-            let logits = self.logits(&mut g, rows.to_vec(), corners)?;
+            let logits = self.logits(&mut g, input.range(lo, hi, fin), corners)?;
             out.extend(probabilities(g.value(logits).data()));
         }
         Ok(out)
+    }
+
+    /// The number of rows of `input`, checked against this model's input width.
+    fn input_rows(&self, input: &InputRows<'_>) -> Result<usize> {
+        match input {
+            InputRows::Matrix(x) => self.rows(x),
+            InputRows::Faces(f) if f.dim() == self.net.config.face_in() => Ok(f.len()),
+            InputRows::Faces(f) => Err(Error::Shape {
+                op: "predict",
+                msg: format!(
+                    "rows of {} values for a model that reads {}",
+                    f.dim(),
+                    self.net.config.face_in()
+                ),
+            }),
+        }
     }
 
     /// Replaces the classifier's batch-norm running statistics by the mean, over
@@ -880,7 +896,19 @@ impl Model {
         corners: &[[u32; 4]],
         face_features: &[f32],
     ) -> Result<Vec<f32>> {
-        self.predict_base_with(points, corners, face_features, CLOUD_STATS_ROWS)
+        self.predict_base_with(points, corners, &InputRows::Matrix(face_features), CLOUD_STATS_ROWS)
+    }
+
+    /// [`Model::predict_base`] with the rows made chunk by chunk as they are scored
+    /// (`rows` gives the same values as [`crate::pipeline::features::face_input`], so
+    /// the probabilities are the same, bit for bit), for the candidates `rows` was made
+    /// of.
+    ///
+    /// # Errors
+    /// As [`Model::predict_base`]; `Error::Shape` also when `rows` has another width than
+    /// the model reads.
+    pub fn predict_base_rows(&self, points: &[[f32; 3]], rows: &FaceRows<'_>) -> Result<Vec<f32>> {
+        self.predict_base_with(points, rows.quads(), &InputRows::Faces(rows), CLOUD_STATS_ROWS)
     }
 
     /// [`Model::predict_base`] with `stats_rows` for [`Model::score_rows`].
@@ -888,10 +916,10 @@ impl Model {
         &self,
         points: &[[f32; 3]],
         corners: &[[u32; 4]],
-        face_features: &[f32],
+        input: &InputRows<'_>,
         stats_rows: usize,
     ) -> Result<Vec<f32>> {
-        let m = self.rows(face_features)?;
+        let m = self.input_rows(input)?;
         if m != corners.len() {
             return Err(Error::Shape {
                 op: "predict_with_points",
@@ -899,7 +927,7 @@ impl Model {
             });
         }
         let Some(kp) = &self.net.point else {
-            return self.score_rows(face_features, None, CLASSIFY_CHUNK_ROWS, stats_rows);
+            return self.score_rows(input, None, CLASSIFY_CHUNK_ROWS, stats_rows);
         };
         check_corners(corners, points.len())?;
         if m == 0 {
@@ -912,7 +940,7 @@ impl Model {
             let proj = self.net.point_projection(&mut g, pf)?;
             g.value(proj).data().to_vec()
         };
-        self.score_rows(face_features, Some((&proj, corners)), CLASSIFY_CHUNK_ROWS, stats_rows)
+        self.score_rows(input, Some((&proj, corners)), CLASSIFY_CHUNK_ROWS, stats_rows)
     }
 
     /// The input rows as the network reads them: with [`ModelConfig::local_frame`], each
@@ -1042,6 +1070,50 @@ const CLASSIFY_CHUNK_ROWS: usize = 64 * crate::tensor::gemm::ROW_BLOCK;
 
 /// `n` row indices spread evenly over `m` rows: ⌊i·m/n⌋ for i < n (in u64: i · m passes
 /// u32 on 32-bit targets, wasm32, for large clouds).
+/// The classifier's input rows: a whole matrix (`M × face_in`, row-major), or a
+/// [`FaceRows`] that makes any row on demand.
+enum InputRows<'a> {
+    Matrix(&'a [f32]),
+    Faces(&'a FaceRows<'a>),
+}
+
+impl InputRows<'_> {
+    /// Rows `lo..hi`, row-major, `w` values each (the model's input width, which
+    /// `Model::input_rows` checked).
+    fn range(&self, lo: usize, hi: usize, w: usize) -> Vec<f32> {
+        match self {
+            InputRows::Matrix(x) => x[lo * w..hi * w].to_vec(),
+            InputRows::Faces(f) => {
+                let dim = f.dim();
+                let mut out = vec![0.0f32; (hi - lo) * dim];
+                crate::par::for_each_chunk_mut(&mut out, dim * 256, |ci, chunk| {
+                    for (r, row) in chunk.chunks_mut(dim).enumerate() {
+                        f.fill(lo + ci * 256 + r, row);
+                    }
+                });
+                out
+            }
+        }
+    }
+
+    /// The rows `pick`, in that order, row-major, `w` values each.
+    fn gather(&self, pick: &[usize], w: usize) -> Vec<f32> {
+        match self {
+            InputRows::Matrix(x) => {
+                pick.iter().flat_map(|&i| x[i * w..(i + 1) * w].iter().copied()).collect()
+            }
+            InputRows::Faces(f) => {
+                let dim = f.dim();
+                let mut out = vec![0.0f32; pick.len() * dim];
+                for (row, &i) in out.chunks_mut(dim).zip(pick) {
+                    f.fill(i, row);
+                }
+                out
+            }
+        }
+    }
+}
+
 fn even_spread(m: usize, n: usize) -> impl Iterator<Item = usize> {
     (0..n).map(move |i| (i as u64 * m as u64 / n as u64) as usize)
 }
@@ -1456,9 +1528,9 @@ mod tests {
             }
             let score = |x: &[f32], c: &[[u32; 4]], stats: usize| {
                 if kp {
-                    model.predict_base_with(&pts, c, x, stats).unwrap()
+                    model.predict_base_with(&pts, c, &InputRows::Matrix(x), stats).unwrap()
                 } else {
-                    model.score_rows(x, None, 100, stats).unwrap()
+                    model.score_rows(&InputRows::Matrix(x), None, 100, stats).unwrap()
                 }
             };
             let got = score(&x, &corners, n_stats);
@@ -1481,9 +1553,49 @@ mod tests {
                 g.value(proj).data().to_vec()
             });
             let points = proj.as_deref().map(|p| (p, &corners[..]));
-            assert!(close(&model.score_rows(&x, points, 7, n_stats).unwrap(), &got) <= 1e-6, "kp {kp}");
+            assert!(
+                close(&model.score_rows(&InputRows::Matrix(&x), points, 7, n_stats).unwrap(), &got) <= 1e-6,
+                "kp {kp}"
+            );
             let whole = score(&x, &corners, m);
             assert!(close(&whole, &got) > 1e-4, "kp {kp}: the check could not fail");
+        }
+    }
+
+    /// Rows made chunk by chunk (`InputRows::Faces`, what `reconstruct` scores) give the
+    /// probabilities of the whole face-input matrix, bit for bit: for the face-only and
+    /// the point-encoder paths, with the statistics of one batch and of a spread sample
+    /// (more candidates than `stats_rows`), over several chunks; rows of the wrong width
+    /// are refused.
+    #[test]
+    fn rows_made_in_chunks_score_as_the_whole_matrix() {
+        use crate::pipeline::candidates::{generate, CandidateConfig};
+        use crate::pipeline::features::face_input;
+        let pts: Vec<[f32; 3]> = (0..150)
+            .map(|i| [(i % 15) as f32 * 0.1, (i / 15) as f32 * 0.1, 0.02 * ((i * 7) % 5) as f32])
+            .collect();
+        let cands = generate(&pts, &CandidateConfig::default()).unwrap();
+        assert!(cands.len() > 300, "{} candidates", cands.len());
+        for kp in [false, true] {
+            let base = if kp { ModelConfig::default_kp() } else { ModelConfig::default_preset() };
+            let model = Model::new(ModelConfig { cloud_batch_stats: true, ..base }, 5).unwrap();
+            let ctx = model.config().use_context;
+            let rows = FaceRows::new(&pts, &cands, ctx);
+            let x = face_input(&pts, &cands, ctx);
+            for stats in [64, usize::MAX] {
+                let want =
+                    model.predict_base_with(&pts, &cands.quads, &InputRows::Matrix(&x), stats).unwrap();
+                let got =
+                    model.predict_base_with(&pts, &cands.quads, &InputRows::Faces(&rows), stats).unwrap();
+                let bits = |v: &[f32]| v.iter().map(|p| p.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&got), bits(&want), "kp {kp}, stats {stats}");
+                if !kp {
+                    let chunked = model.score_rows(&InputRows::Faces(&rows), None, 100, stats).unwrap();
+                    assert_eq!(bits(&chunked), bits(&want), "chunks of 100, stats {stats}");
+                }
+            }
+            let other = FaceRows::new(&pts, &cands, !ctx);
+            assert!(matches!(model.predict_base_rows(&pts, &other), Err(Error::Shape { .. })), "kp {kp}");
         }
     }
 

@@ -12,7 +12,7 @@ use crate::mesh::poly::QuadMesh;
 use crate::mesh::postprocess::{postprocess_with_reserve, PostprocessConfig, PostprocessReport};
 use crate::mesh::watertight::{close_all, WatertightConfig, WatertightReport};
 use crate::pipeline::candidates::{generate, CandidateConfig};
-use crate::pipeline::features::face_input;
+use crate::pipeline::features::FaceRows;
 use crate::pipeline::frame::Frame;
 use crate::pipeline::model::Model;
 use crate::pipeline::second_pass::{covered_unused, covered_unused_by, learned_noise, point_features};
@@ -467,25 +467,31 @@ fn score_cloud(
     let cands = generate(local, &cfg.candidates)?;
     report.candidates = cands.len();
     clock.lap(report, "candidates");
-    // The face input depends on the model only through `use_context`: built once
-    // per value the members need.
-    let mut inputs: [Option<Vec<f32>>; 2] = [None, None];
+    // The face input depends on the model only through `use_context`: one row maker
+    // per value the members need. The rows themselves are made chunk by chunk while
+    // the classifier scores them (session 38; before, the whole `M × 45` matrix was
+    // built here and held through classification: at a million points, 1.45 GB and the
+    // run's peak), so the "features" stage is now only the context columns' edge
+    // table, and making the rows is timed with "classify".
+    let mut inputs: [Option<FaceRows>; 2] = [None, None];
     for m in models {
         let ctx = m.config().use_context;
         if inputs[ctx as usize].is_none() {
-            inputs[ctx as usize] = Some(face_input(local, &cands, ctx));
+            inputs[ctx as usize] = Some(FaceRows::new(local, &cands, ctx));
         }
     }
     clock.lap(report, "features");
-    // Every member's classifier first, so that the face inputs and the candidates'
+    // Every member's classifier first, so that the row makers and the candidates'
     // side tables (the largest buffers at millions of candidates) are freed before the
     // refinement rounds build their graph.
     let mut bases = Vec::with_capacity(models.len());
     for (k, model) in models.iter().enumerate() {
-        let x = inputs[model.config().use_context as usize].as_deref().unwrap_or_default();
+        let Some(rows) = &inputs[model.config().use_context as usize] else {
+            return Err(Error::invalid("internal error: no face rows for a member"));
+        };
         // The point encoder (if the model has one) reads the same normalised cloud the
         // candidates were built in, as in training.
-        let base = model.predict_base(local, &cands.quads, x)?;
+        let base = model.predict_base_rows(local, rows)?;
         check_probabilities(k, &base)?;
         bases.push(base);
     }
@@ -1089,7 +1095,7 @@ mod tests {
         let local = frame.to_local_all(&pts);
         let cands = generate(&local, &cfg.candidates).expect("candidates");
         let prob = |m: &Model| {
-            let x = face_input(&local, &cands, m.config().use_context);
+            let x = crate::pipeline::features::face_input(&local, &cands, m.config().use_context);
             m.predict_with_points(&local, &cands.quads, &x).expect("probabilities")
         };
         let (pa, pb) = (prob(&a), prob(&b));

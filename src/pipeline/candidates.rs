@@ -570,8 +570,9 @@ struct Ordered {
 /// the length of that corner's cross product and `ll` the product of its two edge
 /// lengths. The corner's Jacobian term is `dot(cross, n) / ll` with `n` a unit vector,
 /// at most `cl / ll` in exact arithmetic; the rounding of the dot product, the norms
-/// and the divisions stays far below the 1e-5 relative margin (about 15 units of the
-/// last place) as long as nothing underflows, which the floors on `cl` and `ll` ensure.
+/// and the divisions (about 15 units in the last place at most) stays far below the
+/// 1e-5 relative margin (about 84 units) as long as nothing underflows, which the
+/// floors on `cl` and `ll` ensure.
 /// Elsewhere the bound is the trivial 1 (plus the margin).
 #[inline]
 fn jacobian_bound(sine: f32, cl: f32, ll: f32) -> f32 {

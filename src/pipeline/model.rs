@@ -632,7 +632,7 @@ impl Model {
         self.score_rows(&InputRows::Matrix(face_features), None, chunk, CLOUD_STATS_ROWS)
     }
 
-    /// The classifier's probabilities for the rows of `face_features`; with `points`,
+    /// The classifier's probabilities for the rows of `input`; with `points`,
     /// the per-point features already through the classifier's first layer
     /// ([`Network::point_projection`]) and each row's corners. Chunks of at most `chunk`
     /// rows, except for a [`ModelConfig::cloud_batch_stats`] model, whose batch norm

@@ -571,8 +571,12 @@ struct Ordered {
 /// lengths. The corner's Jacobian term is `dot(cross, n) / ll` with `n` a unit vector,
 /// at most `cl / ll` in exact arithmetic; the rounding of the dot product, the norms
 /// and the divisions (about 15 units in the last place at most) stays far below the
-/// 1e-5 relative margin (about 84 units) as long as nothing underflows, which the
-/// floors on `cl` and `ll` ensure.
+/// 1e-5 relative margin (about 84 units) as long as nothing underflows. The floors on
+/// `cl` and `ll` see to that for the corner; the unit normal comes from the diagonals'
+/// cross product, which the corner filters `stage2` applies before it computes the
+/// Jacobian (every corner's sine at least `min_sine`, every two corner normals within
+/// `min_normal_dot`) keep of the order of `cl` (and where that cross product is 0 the
+/// normal is 0 and the Jacobian term is 0, below the bound).
 /// Elsewhere the bound is the trivial 1 (plus the margin).
 #[inline]
 fn jacobian_bound(sine: f32, cl: f32, ll: f32) -> f32 {

@@ -1068,8 +1068,6 @@ impl Model {
 /// of the GEMM's row block, so chunking changes no bit of the result.
 const CLASSIFY_CHUNK_ROWS: usize = 64 * crate::tensor::gemm::ROW_BLOCK;
 
-/// `n` row indices spread evenly over `m` rows: ⌊i·m/n⌋ for i < n (in u64: i · m passes
-/// u32 on 32-bit targets, wasm32, for large clouds).
 /// The classifier's input rows: a whole matrix (`M × face_in`, row-major), or a
 /// [`FaceRows`] that makes any row on demand.
 enum InputRows<'a> {
@@ -1114,6 +1112,8 @@ impl InputRows<'_> {
     }
 }
 
+/// `n` row indices spread evenly over `m` rows: ⌊i·m/n⌋ for i < n (in u64: i · m passes
+/// u32 on 32-bit targets, wasm32, for large clouds).
 fn even_spread(m: usize, n: usize) -> impl Iterator<Item = usize> {
     (0..n).map(move |i| (i as u64 * m as u64 / n as u64) as usize)
 }

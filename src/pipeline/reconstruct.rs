@@ -495,13 +495,14 @@ fn score_cloud(
         check_probabilities(k, &base)?;
         bases.push(base);
     }
-    let t_classify = clock.split();
     drop(inputs);
     // The rest of `cands` (kNN table, normals, ranks) goes with the block.
     let quads = {
         let c = cands;
         c.quads
     };
+    // Freeing those counts with classification, not with the first round.
+    let t_classify = clock.split();
     let mut t_refine = None;
     let mut probs: Vec<f32> = Vec::new();
     for (k, (model, base)) in models.iter().zip(bases).enumerate() {

@@ -565,6 +565,47 @@ struct Ordered {
     bound: f32,
 }
 
+/// One corner of a quad, from the edge arriving at it and the edge leaving it and
+/// their lengths: the one computation `Local::stage2` and the proposer's corner table
+/// share, so that both see the same bits.
+struct Corner {
+    /// `e_in × e_out`.
+    cross: [f32; 3],
+    /// Its length.
+    cl: f32,
+    /// `l_in · l_out`.
+    ll: f32,
+    /// Whether both are positive (the corner has a normal and a sine).
+    ok: bool,
+    /// The unit corner normal (0 where not `ok`).
+    normal: [f32; 3],
+    /// `(cl / ll).min(1)` (0 where not `ok`).
+    sine: f32,
+}
+
+impl Corner {
+    #[inline]
+    fn new(e_in: [f32; 3], e_out: [f32; 3], l_in: f32, l_out: f32) -> Corner {
+        let cross = cross(e_in, e_out);
+        let cl = norm(cross);
+        let ll = l_in * l_out;
+        let ok = ll > 0.0 && cl > 0.0;
+        let (normal, sine) = if ok {
+            ([cross[0] / cl, cross[1] / cl, cross[2] / cl], (cl / ll).min(1.0))
+        } else {
+            ([0.0; 3], 0.0)
+        };
+        Corner { cross, cl, ll, ok, normal, sine }
+    }
+
+    /// The corner's own filters: sine at least `min_sine`, normal on the side of the
+    /// proposer's normal `np`.
+    #[inline]
+    fn passes(&self, np: [f32; 3], cfg: &CandidateConfig) -> bool {
+        !(self.sine < cfg.min_sine || dot(self.normal, np) <= 0.0)
+    }
+}
+
 /// An upper bound of a quad's scaled Jacobian (as `Local::stage2` computes it, in
 /// floating point) from the sine of one of its corners, `(cl / ll).min(1)` with `cl`
 /// the length of that corner's cross product and `ll` the product of its two edge
@@ -724,19 +765,9 @@ impl Local<'_> {
         let mut cn = [[0.0f32; 3]; 4];
         for x in 0..4 {
             let prev = (x + 3) % 4;
-            let cc = cross(ev[prev], ev[x]);
-            let cl = norm(cc);
-            let ll = len[prev] * len[x];
-            let sine = if ll > 0.0 && cl > 0.0 {
-                ok[x] = true;
-                cn[x] = [cc[0] / cl, cc[1] / cl, cc[2] / cl];
-                (cl / ll).min(1.0)
-            } else {
-                0.0
-            };
-            cv[x] = cc;
-            cll[x] = ll;
-            if sine < cfg.min_sine || dot(cn[x], self.np) <= 0.0 {
+            let k = Corner::new(ev[prev], ev[x], len[prev], len[x]);
+            (cv[x], cll[x], ok[x], cn[x]) = (k.cross, k.ll, k.ok, k.normal);
+            if !k.passes(self.np, cfg) {
                 return None;
             }
             if (0..x).any(|y| dot(cn[y], cn[x]) < cfg.min_normal_dot) {
@@ -830,19 +861,9 @@ fn propose(
                     continue;
                 }
                 let (ex, ey) = (x * w, y);
-                let cc = cross(sc.tab.e[ex], sc.tab.e[ey]);
-                let cl = norm(cc);
-                let ll = sc.tab.d[ex] * sc.tab.d[ey];
-                let mut cn = [0.0f32; 3];
-                let sine = if ll > 0.0 && cl > 0.0 {
-                    cn = [cc[0] / cl, cc[1] / cl, cc[2] / cl];
-                    (cl / ll).min(1.0)
-                } else {
-                    0.0
-                };
-                let fails = sine < cfg.min_sine || dot(cn, np) <= 0.0;
-                sc.tab.c0.push(if fails { -1.0 } else { sine });
-                sc.tab.c0_bound.push(jacobian_bound(sine, cl, ll));
+                let k = Corner::new(sc.tab.e[ex], sc.tab.e[ey], sc.tab.d[ex], sc.tab.d[ey]);
+                sc.tab.c0.push(if k.passes(np, cfg) { k.sine } else { -1.0 });
+                sc.tab.c0_bound.push(jacobian_bound(k.sine, k.cl, k.ll));
             }
         }
     }
@@ -1537,7 +1558,7 @@ fn proposals(
     let n = points.len();
     let triples = cfg.k.min(n.saturating_sub(1));
     let slots = cfg.per_point.min(triples * triples.saturating_sub(1) * triples.saturating_sub(2) / 6);
-    if slots == 0 || n == 0 {
+    if slots == 0 {
         return Vec::new();
     }
     let batch = (table_entries / slots / CHUNK).max(1) * CHUNK;

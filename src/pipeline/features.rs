@@ -217,15 +217,7 @@ pub fn context_geometry_row(
 /// The network input rows for `cands`: F_info, then (if `with_context`) the context
 /// features, `F_INFO_DIM (+ CONTEXT_DIM)` values per candidate.
 pub fn face_input(points: &[[f32; 3]], cands: &Candidates, with_context: bool) -> Vec<f32> {
-    let rows = FaceRows::new(points, cands, with_context);
-    let dim = rows.dim();
-    let mut out = vec![0.0f32; cands.len() * dim];
-    crate::par::for_each_chunk_mut(&mut out, dim * 256, |ci, chunk| {
-        for (r, row) in chunk.chunks_mut(dim).enumerate() {
-            rows.fill(ci * 256 + r, row);
-        }
-    });
-    out
+    FaceRows::new(points, cands, with_context).rows(0, cands.len())
 }
 
 /// The rows of [`face_input`] one candidate at a time, for a caller that needs only some
@@ -266,6 +258,21 @@ impl<'a> FaceRows<'a> {
     /// The candidates the rows describe, in row order.
     pub fn quads(&self) -> &[[u32; 4]] {
         &self.cands.quads
+    }
+
+    /// The rows of candidates `lo..hi`, row-major (made in parallel).
+    ///
+    /// # Panics
+    /// If `lo > hi` or `hi` is beyond the last candidate.
+    pub fn rows(&self, lo: usize, hi: usize) -> Vec<f32> {
+        let dim = self.dim();
+        let mut out = vec![0.0f32; (hi - lo) * dim];
+        crate::par::for_each_chunk_mut(&mut out, dim * 256, |ci, chunk| {
+            for (r, row) in chunk.chunks_mut(dim).enumerate() {
+                self.fill(lo + ci * 256 + r, row);
+            }
+        });
+        out
     }
 
     /// Candidate `c`'s row into `row[..self.dim()]`.

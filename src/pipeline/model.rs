@@ -1081,16 +1081,7 @@ impl InputRows<'_> {
     fn range(&self, lo: usize, hi: usize, w: usize) -> Vec<f32> {
         match self {
             InputRows::Matrix(x) => x[lo * w..hi * w].to_vec(),
-            InputRows::Faces(f) => {
-                let dim = f.dim();
-                let mut out = vec![0.0f32; (hi - lo) * dim];
-                crate::par::for_each_chunk_mut(&mut out, dim * 256, |ci, chunk| {
-                    for (r, row) in chunk.chunks_mut(dim).enumerate() {
-                        f.fill(lo + ci * 256 + r, row);
-                    }
-                });
-                out
-            }
+            InputRows::Faces(f) => f.rows(lo, hi),
         }
     }
 

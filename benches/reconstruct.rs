@@ -21,7 +21,6 @@ use point2quad::pipeline::noise::{noise_points, NoiseConfig};
 use point2quad::pipeline::reconstruct::{reconstruct, reconstruct_with_report, ReconstructConfig};
 use point2quad::rng::Rng;
 use std::hint::black_box;
-use std::path::Path;
 use std::time::Instant;
 
 #[path = "common/mod.rs"]
@@ -30,15 +29,12 @@ use common::{cpu_ms, median, peak_rss_mib};
 
 const RUNS: usize = 5;
 
-const SHIPPED_WEIGHTS: &[u8] = include_bytes!("../fixtures/point2quad-default.p2qm");
-
 fn main() {
     let mesh = shapes::torus(130, 70, 1.0, 0.4);
     let mut rng = Rng::new(1);
     let mut cloud = mesh.vertices.clone();
     cloud.extend(noise_points(&mesh, &NoiseConfig::default(), &mut rng).expect("bench: noise points"));
-    let model = Model::from_bytes(SHIPPED_WEIGHTS, Path::new("fixtures/point2quad-default.p2qm"))
-        .expect("bench: shipped weights");
+    let model = Model::shipped().expect("bench: shipped weights");
     let mut cfg = ReconstructConfig::default();
     if let Ok(f) = std::env::var("RECONSTRUCT_BENCH_FAR") {
         cfg.candidates.far_per_point = f.parse().expect("bench: RECONSTRUCT_BENCH_FAR");

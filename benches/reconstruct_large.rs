@@ -12,14 +12,11 @@
 
 use point2quad::pipeline::model::Model;
 use point2quad::pipeline::reconstruct::{reconstruct_with_report, ReconstructConfig};
-use std::path::Path;
 use std::time::Instant;
 
 #[path = "common/mod.rs"]
 mod common;
 use common::peak_rss_mib;
-
-const SHIPPED_WEIGHTS: &[u8] = include_bytes!("../fixtures/point2quad-default.p2qm");
 
 fn main() {
     let side: usize = match std::env::var("RECONSTRUCT_LARGE_SIDE") {
@@ -34,8 +31,7 @@ fn main() {
             [x, y, 0.05 * (6.0 * x).sin() * (5.0 * y).cos()]
         })
         .collect();
-    let model = Model::from_bytes(SHIPPED_WEIGHTS, Path::new("fixtures/point2quad-default.p2qm"))
-        .expect("bench: shipped weights");
+    let model = Model::shipped().expect("bench: shipped weights");
     let cfg = ReconstructConfig::default();
     let s = Instant::now();
     let (mesh, report) = reconstruct_with_report(&cloud, &model, &cfg).expect("bench: reconstruct");

@@ -597,9 +597,7 @@ fn losses() {
     use point2quad::mesh::postprocess::{postprocess, PostprocessConfig};
     use point2quad::pipeline::features::face_input;
     use point2quad::pipeline::model::Model;
-    let model =
-        Model::from_bytes(include_bytes!("../fixtures/point2quad-default.p2qm"), std::path::Path::new("m"))
-            .unwrap();
+    let model = Model::shipped().unwrap();
     // Default: the validation split `train` holds out (by a hash of the sample name) —
     // the real meshes among its 23 validation samples.
     const VAL: [&str; 6] = [

@@ -423,7 +423,15 @@ fn help_for_every_subcommand() {
                 assert!(stderr(&out).is_empty(), "{args:?}");
             }
         }
+        // `help COMMAND` prints what `COMMAND --help` prints (not the overview).
+        let own = p2q(&[cmd, "--help"]);
+        for args in [vec!["help", cmd], vec!["--quiet", "help", cmd]] {
+            let out = p2q(&args);
+            assert_eq!(out.status.code(), Some(0), "{args:?}: {}", stderr(&out));
+            assert_eq!(out.stdout, own.stdout, "{args:?}");
+        }
     }
+    assert_fails(&p2q(&["help", "frobnicate"]), 2, &["unknown command", "frobnicate"], "help frobnicate");
 }
 
 /// Every number in an `eval --json` object, checked finite (no `null` standing in

@@ -30,6 +30,13 @@ use crate::{Error, Result};
 use std::path::Path;
 use std::sync::Arc;
 
+/// The shipped weights' file image ([`Model::shipped`] loads it): the `default` preset
+/// reading normals without their signs, with 6 refinement rounds, about 340 KB.
+pub const SHIPPED_WEIGHTS: &[u8] = include_bytes!("../../fixtures/point2quad-default.p2qm");
+
+/// How errors and notes name the shipped weights.
+pub const SHIPPED_NAME: &str = "<shipped fixtures/point2quad-default.p2qm>";
+
 /// The model presets [`ModelConfig::preset`] knows, in the order the CLI lists them.
 pub const PRESETS: [&str; 3] = ["default", "default_kp", "paper"];
 
@@ -1055,6 +1062,18 @@ impl Model {
         Model::from_checkpoint(&Checkpoint::from_bytes(bytes, name)?, name)
     }
 
+    /// The weights shipped with the crate (`fixtures/point2quad-default.p2qm`, what
+    /// `make train` writes and `point2quad reconstruct` uses without `--model`), compiled
+    /// into the library: no file is read. A program that never calls this does not
+    /// carry the bytes (the linker drops them; [`SHIPPED_WEIGHTS`]).
+    ///
+    /// # Errors
+    /// None in practice (a test loads them); the signature is that of
+    /// [`Model::from_bytes`], whose errors name the weights [`SHIPPED_NAME`].
+    pub fn shipped() -> Result<Model> {
+        Model::from_bytes(SHIPPED_WEIGHTS, Path::new(SHIPPED_NAME))
+    }
+
     /// Loads a weights/checkpoint file.
     ///
     /// # Errors
@@ -1595,8 +1614,8 @@ mod tests {
     /// columns) load, and re-serialise to the very same bytes.
     #[test]
     fn shipped_weights_load_and_reserialise_bit_exactly() {
-        let bytes = include_bytes!("../../fixtures/point2quad-default.p2qm");
-        let m = Model::from_bytes(bytes, Path::new("fixture")).unwrap();
+        let bytes = SHIPPED_WEIGHTS;
+        let m = Model::shipped().unwrap();
         let want = ModelConfig {
             refine_rounds: 6,
             refine_widths: vec![32, 32],

@@ -8,7 +8,7 @@ use point2quad::io::mesh_io::{prepare_mesh_with, WriteOptions};
 use point2quad::io::points::read_points;
 use point2quad::mesh::poly::PolyMesh;
 use point2quad::mesh::watertight::WatertightConfig;
-use point2quad::pipeline::model::Model;
+use point2quad::pipeline::model::{Model, SHIPPED_NAME};
 use point2quad::pipeline::reconstruct::{
     reconstruct_observed, ReconstructConfig, SecondPass, SecondPassCover, SecondPassMode, StageDone,
 };
@@ -167,18 +167,6 @@ const SPEC: Spec = Spec {
         "--watertight",
     ],
 };
-
-/// The weights shipped with the project (`make train` writes them), embedded in the
-/// binary so that it works from anywhere.
-const SHIPPED_WEIGHTS: &[u8] = include_bytes!("../../../fixtures/point2quad-default.p2qm");
-
-/// How errors name the shipped weights.
-const SHIPPED_NAME: &str = "<shipped fixtures/point2quad-default.p2qm>";
-
-/// The shipped model.
-pub fn shipped_model() -> Result<Model> {
-    Model::from_bytes(SHIPPED_WEIGHTS, Path::new(SHIPPED_NAME))
-}
 
 /// `--model`'s value: one weights file, or (when no file has that name) a
 /// comma-separated list of them, an ensemble. Each model comes with its file name.
@@ -402,7 +390,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     let models = match a.value("--model") {
         Some(m) => load_models(cmd, m)?,
-        None => vec![(SHIPPED_NAME.to_string(), shipped_model()?)],
+        None => vec![(SHIPPED_NAME.to_string(), Model::shipped()?)],
     };
     let members: Vec<&Model> = models.iter().map(|(_, m)| m).collect();
     // Progress on long work: a large cloud's stages are named as they end.

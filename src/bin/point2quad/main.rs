@@ -28,7 +28,8 @@ const USAGE: &str = "\
 point2quad: point cloud -> pure-quad manifold mesh (Point2Quad, from scratch)
 
 USAGE:
-    point2quad <COMMAND> [ARGS...]        (point2quad <COMMAND> --help for details)
+    point2quad <COMMAND> [ARGS...]
+    point2quad help <COMMAND>             the command's details (as point2quad <COMMAND> --help)
 
 OPTIONS (every command, before or after it):
     --threads N  worker threads, 1 to 1024 [all cores, or RAYON_NUM_THREADS, which it
@@ -46,6 +47,22 @@ COMMANDS:
     render       MESH -o OUT.svg           shaded SVG picture of a mesh
     synth        -o CLOUD.xyz [--gt GT.obj] synthetic noisy cloud + ground-truth quad mesh
 ";
+
+/// A command's help text and entry point, by name.
+fn command(name: &str) -> Option<(&'static str, RunFn)> {
+    Some(match name {
+        "reconstruct" => (cmd_reconstruct::HELP, cmd_reconstruct::run),
+        "candidates" => (cmd_candidates::HELP, cmd_candidates::run),
+        "eval" => (cmd_eval::HELP, cmd_eval::run),
+        "dataset" => (cmd_dataset::HELP, cmd_dataset::run),
+        "train" => (cmd_train::HELP, cmd_train::run),
+        "refine" => (cmd_refine::HELP, cmd_refine::run),
+        "repair" => (cmd_repair::HELP, cmd_repair::run),
+        "render" => (cmd_render::HELP, cmd_render::run),
+        "synth" => (cmd_synth::HELP, cmd_synth::run),
+        _ => return None,
+    })
+}
 
 fn main() -> ExitCode {
     // `std::env::args` panics on an argument that is not valid Unicode (a file name
@@ -82,26 +99,34 @@ fn main() -> ExitCode {
     let rest = &rest[..];
     let (help, run): (&str, RunFn) = match cmd.as_str() {
         "-h" | "--help" | "help" => {
-            let _ = output::stdout(USAGE);
-            return ExitCode::SUCCESS;
+            // `point2quad help COMMAND` is `point2quad COMMAND --help`.
+            let topic = rest.iter().find(|a| !a.starts_with('-'));
+            return match topic.map(|t| (t, command(t))) {
+                None => {
+                    let _ = output::stdout(USAGE);
+                    ExitCode::SUCCESS
+                }
+                Some((_, Some((help, _)))) => {
+                    let _ = output::stdout(&format!("{help}{GLOBAL_HELP}"));
+                    ExitCode::SUCCESS
+                }
+                Some((t, None)) => {
+                    output::stderr(&format!("point2quad help: unknown command {t:?}\n\n{USAGE}\n"));
+                    ExitCode::from(2)
+                }
+            };
         }
         "-V" | "--version" => {
             let _ = output::stdout(&format!("point2quad {}\n", env!("CARGO_PKG_VERSION")));
             return ExitCode::SUCCESS;
         }
-        "reconstruct" => (cmd_reconstruct::HELP, cmd_reconstruct::run),
-        "candidates" => (cmd_candidates::HELP, cmd_candidates::run),
-        "eval" => (cmd_eval::HELP, cmd_eval::run),
-        "dataset" => (cmd_dataset::HELP, cmd_dataset::run),
-        "train" => (cmd_train::HELP, cmd_train::run),
-        "refine" => (cmd_refine::HELP, cmd_refine::run),
-        "repair" => (cmd_repair::HELP, cmd_repair::run),
-        "render" => (cmd_render::HELP, cmd_render::run),
-        "synth" => (cmd_synth::HELP, cmd_synth::run),
-        other => {
-            output::stderr(&format!("point2quad: unknown command {other:?}\n\n{USAGE}\n"));
-            return ExitCode::from(2);
-        }
+        name => match command(name) {
+            Some(c) => c,
+            None => {
+                output::stderr(&format!("point2quad: unknown command {name:?}\n\n{USAGE}\n"));
+                return ExitCode::from(2);
+            }
+        },
     };
     if rest.iter().any(|a| a == "-h" || a == "--help") {
         let _ = output::stdout(&format!("{help}{GLOBAL_HELP}"));

@@ -1110,9 +1110,43 @@ fn inside_count(c: &Pre, rel: &[[f32; 3]], cfg: &CandidateConfig) -> u16 {
     inside.min(u32::from(u16::MAX)) as u16
 }
 
-/// One kept candidate of one proposer: (sorted vertex key, canonical cyclic quad,
-/// rank, score, inside count).
-type Entry = ([u32; 4], [u32; 4], u16, f32, u16);
+/// One kept candidate of one proposer: its sorted vertex set, its cyclic order as a
+/// code over that set ([`Entry::canonical`]), rank, score and inside count. 28 bytes:
+/// a million-point cloud's proposals fill tens of millions of them (until session 39
+/// the canonical quad was stored beside the set, 40 bytes an entry).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Entry {
+    set: [u32; 4],
+    score: f32,
+    rank: u16,
+    inside: u16,
+    /// Which of the six orders of `set[1..4]` follows `set[0]` in the canonical quad.
+    order: u8,
+}
+
+const _: () = assert!(std::mem::size_of::<Entry>() == 28);
+
+/// The six orders of three things, as [`Entry::order`] numbers them.
+const ORDERS: [[usize; 3]; 6] = [[1, 2, 3], [1, 3, 2], [2, 1, 3], [2, 3, 1], [3, 1, 2], [3, 2, 1]];
+
+impl Entry {
+    /// The entry of the cyclic quad `q` (4 distinct indices).
+    fn new(q: [u32; 4], rank: u16, score: f32, inside: u16) -> Entry {
+        let set = vertex_set(&q);
+        let c = canonical(q);
+        let order = ORDERS
+            .iter()
+            .position(|o| o.map(|i| set[i]) == [c[1], c[2], c[3]])
+            .expect("internal error: a candidate's corners are distinct") as u8;
+        Entry { set, score, rank, inside, order }
+    }
+
+    /// The canonical cyclic quad ([`canonical`]): its smallest index, `set[0]`, first.
+    fn canonical(&self) -> [u32; 4] {
+        let o = ORDERS[self.order as usize];
+        [self.set[0], self.set[o[0]], self.set[o[1]], self.set[o[2]]]
+    }
+}
 
 /// The default plane tolerance of the inside test ([`CandidateConfig::inside_plane_tol`]).
 pub const DEFAULT_INSIDE_PLANE_TOL: f32 = 0.3;
@@ -1530,7 +1564,7 @@ fn append_beyond(added: Vec<([u32; 4], f32, u16)>, beyond: u16, cols: Columns<'_
     }
 }
 
-/// Entries of [`proposals`]' slot table at most (about 1.3 GB): one table for clouds up to
+/// Entries of [`proposals`]' slot table at most (about 0.9 GB): one table for clouds up to
 /// a million points at the default budget, batches of points beyond that or with a larger
 /// `per_point`.
 const PROPOSAL_TABLE_ENTRIES: usize = 1 << 25;
@@ -1554,7 +1588,7 @@ fn proposals(
     table_entries: usize,
 ) -> Vec<Entry> {
     const CHUNK: usize = 64;
-    const EMPTY: Entry = ([u32::MAX; 4], [u32::MAX; 4], 0, 0.0, 0);
+    const EMPTY: Entry = Entry { set: [u32::MAX; 4], score: 0.0, rank: 0, inside: 0, order: 0 };
     let n = points.len();
     let triples = cfg.k.min(n.saturating_sub(1));
     let slots = cfg.per_point.min(triples * triples.saturating_sub(1) * triples.saturating_sub(2) / 6);
@@ -1577,23 +1611,17 @@ fn proposals(
                 let row = &mut rows[(j - ch * CHUNK) * slots..][..slots];
                 debug_assert!(sc.out.len() <= slots, "a kept list longer than its triples");
                 for (r, (kp, slot)) in sc.out.iter().zip(row).enumerate() {
-                    *slot = (
-                        vertex_set(&kp.quad),
-                        canonical(kp.quad),
-                        r.min(u16::MAX as usize) as u16,
-                        kp.score,
-                        kp.inside,
-                    );
+                    *slot = Entry::new(kp.quad, r.min(u16::MAX as usize) as u16, kp.score, kp.inside);
                 }
             }
         });
         if bn == n {
-            table.retain(|e| e.0 != EMPTY.0);
+            table.retain(|e| e.set != EMPTY.set);
             return table;
         }
-        let kept = t.iter().filter(|e| e.0 != EMPTY.0).count();
+        let kept = t.iter().filter(|e| e.set != EMPTY.set).count();
         let mut part = Vec::with_capacity(kept);
-        part.extend(t.iter().filter(|e| e.0 != EMPTY.0));
+        part.extend(t.iter().filter(|e| e.set != EMPTY.set));
         parts.push(part);
     }
     drop(table);
@@ -1629,7 +1657,11 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
     // Within a vertex set, the entry with the best (rank, score, orientation) first,
     // so the choice does not depend on the proposer order or thread count.
     all.sort_unstable_by(|x, y| {
-        x.0.cmp(&y.0).then(x.2.cmp(&y.2)).then(x.3.total_cmp(&y.3)).then(x.1.cmp(&y.1))
+        x.set
+            .cmp(&y.set)
+            .then(x.rank.cmp(&y.rank))
+            .then(x.score.total_cmp(&y.score))
+            .then_with(|| x.canonical().cmp(&y.canonical()))
     });
     let mut quads = Vec::new();
     let mut proposers = Vec::new();
@@ -1639,14 +1671,14 @@ pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates
     let mut s = 0;
     while s < all.len() {
         let mut e = s + 1;
-        while e < all.len() && all[e].0 == all[s].0 {
+        while e < all.len() && all[e].set == all[s].set {
             e += 1;
         }
-        quads.push(all[s].1);
+        quads.push(all[s].canonical());
         proposers.push((e - s).min(255) as u8);
-        rank.push(all[s].2);
-        score.push(all[s].3);
-        inside.push(all[s].4);
+        rank.push(all[s].rank);
+        score.push(all[s].score);
+        inside.push(all[s].inside);
         s = e;
     }
     // The slot table (`n · slots` entries, the stage's largest buffer) is not needed
@@ -2164,6 +2196,32 @@ mod tests {
         assert!(checked > 1000 && tighter > checked / 2, "{checked} checked, {tighter} tighter");
     }
 
+    /// An entry gives back the canonical quad it was made from, for every cyclic order
+    /// and direction of 4 distinct indices (equal and extreme values among the others).
+    #[test]
+    fn entries_keep_the_cyclic_order() {
+        let mut rng = crate::rng::Rng::new(39);
+        for t in 0..2000 {
+            let pool = [0, 1, 2, 7, 1 << 20, u32::MAX - 2, u32::MAX - 1];
+            let mut q = [0u32; 4];
+            for i in 0..4 {
+                q[i] = loop {
+                    let v = if t % 2 == 0 { pool[rng.below(pool.len())] } else { rng.below(1 << 30) as u32 };
+                    if !q[..i].contains(&v) {
+                        break v;
+                    }
+                };
+            }
+            for s in 0..4 {
+                for r in [started_at(q, s), started_at([q[3], q[2], q[1], q[0]], s)] {
+                    let e = Entry::new(r, 3, 0.5, 1);
+                    assert_eq!(e.canonical(), canonical(r), "{r:?}");
+                    assert_eq!(e.set, vertex_set(&r), "{r:?}");
+                }
+            }
+        }
+    }
+
     /// The proposals in batches (a slot table too small for the cloud: many batches and a
     /// short last one) are the proposals of one table, entry for entry, and those are every
     /// point's kept list in point order, then rank order.
@@ -2182,8 +2240,11 @@ mod tests {
                     (vertex_set(&kp.quad), canonical(kp.quad), r as u16, kp.score.to_bits(), kp.inside)
                 }));
             }
-            let bits =
-                |v: &[Entry]| v.iter().map(|e| (e.0, e.1, e.2, e.3.to_bits(), e.4)).collect::<Vec<_>>();
+            let bits = |v: &[Entry]| {
+                v.iter()
+                    .map(|e| (e.set, e.canonical(), e.rank, e.score.to_bits(), e.inside))
+                    .collect::<Vec<_>>()
+            };
             assert_eq!(bits(&one), want, "per_point {per_point}");
             // 64 points a batch at most: 391 points in 7 batches, the last of 7 points.
             for entries in [1, 64 * per_point, 100 * per_point] {

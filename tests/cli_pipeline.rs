@@ -1504,6 +1504,31 @@ fn synth_jitter_moves_the_ground_truth_with_the_cloud() {
     assert_ne!(std::fs::read(&plain).unwrap(), std::fs::read(&cloud).unwrap());
 }
 
+/// `synth --triangle-split` writes the mesh's conversion (the library's `triangle_split`,
+/// tested against its definition in `shapes_props`): the input's vertices first, six
+/// quads per quad, the cloud starting with the converted mesh's vertices.
+#[test]
+fn synth_triangle_split_converts_the_ground_truth() {
+    let s = Scratch::new("synth_tri");
+    let meshes = s.p("meshes");
+    write_meshes(&meshes);
+    let src = s.p("meshes/b_torus.obj");
+    let (cloud, gt) = (s.p("t.xyz"), s.p("t.obj"));
+    ok(&["synth", "--from", &src, "-o", &cloud, "--gt", &gt, "--triangle-split", "--seed", "3"]);
+    let orig = point2quad::io::mesh_io::read_mesh(Path::new(&src)).unwrap();
+    let split = point2quad::io::mesh_io::read_mesh(Path::new(&gt)).unwrap();
+    let pts = point2quad::io::points::read_points(Path::new(&cloud)).unwrap();
+    assert_eq!(split.faces.len(), 6 * orig.faces.len());
+    assert_eq!(&split.vertices[..orig.vertices.len()], &orig.vertices[..]);
+    assert_eq!(&pts[..split.vertices.len()], &split.vertices[..]);
+    let want = point2quad::mesh::shapes::triangle_split(
+        &orig.to_quads().unwrap(),
+        &mut point2quad::rng::Rng::new(3),
+    );
+    let faces: Vec<Vec<u32>> = want.quads.iter().map(|q| q.to_vec()).collect();
+    assert_eq!(split.faces, faces);
+}
+
 /// Session 21's review: a held-out copy takes its noise draws with it; a noise draw cannot
 /// be held out on its own; two files of one sample name are refused (splits and draw
 /// groups go by that name); mesh files whose names sanitise alike get samples apart.
@@ -1706,6 +1731,19 @@ fn reconstruct_and_repair_watertight() {
     let mesh = point2quad::io::mesh_io::read_mesh(Path::new(&closed)).unwrap();
     assert!(mesh.vertices.len() >= pts.len());
     assert!(pts.iter().zip(&mesh.vertices).all(|(a, b)| a == b));
+    // The summary's new vertices (the post-process's) and the closing's add up to the
+    // vertices the output has beyond the points (session 39's audit: the closing's were
+    // counted on both lines).
+    let number_before = |text: &str, tail: &str| -> usize {
+        let head = &text[..text.find(tail).unwrap_or_else(|| panic!("no {tail:?} in {text}"))];
+        let digits: String =
+            head.chars().rev().skip_while(|c| *c == ' ').take_while(char::is_ascii_digit).collect();
+        digits.chars().rev().collect::<String>().parse().unwrap_or_else(|_| panic!("{tail:?} in {text}"))
+    };
+    let (filled, closing) =
+        (number_before(&err, "new vertices)"), number_before(&err, "new vertices in all"));
+    assert!(closing > 0, "{err}");
+    assert_eq!(filled + closing, mesh.vertices.len() - pts.len(), "{err}");
     let never = s.p("never.obj");
     let err = fails(&["reconstruct", &cloud, "-o", &never, "--watertight-max-loop", "8"], 2);
     assert!(err.contains("--watertight"), "{err}");

@@ -198,6 +198,39 @@ fn cli_is_deterministic_and_writes_an_index() {
     }
 }
 
+/// `--tri-split N` adds samples after the others, which keep their bytes; each is a
+/// synthetic shape converted as `synth --triangle-split` converts it (a stream of its own).
+#[test]
+fn cli_tri_split_samples_leave_the_others_alone() {
+    let (a, b) = (tmp("tri_a"), tmp("tri_b"));
+    for (out, extra) in [(&a, &[][..]), (&b, &["--tri-split", "1"][..])] {
+        let mut args = vec!["dataset", "--out", out.to_str().unwrap(), "--synthetic", "2", "--seed", "5"];
+        args.extend(extra);
+        let o = p2q(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let names = |d: &PathBuf| -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+    let (na, nb) = (names(&a), names(&b));
+    let extra: Vec<&String> = nb.iter().filter(|n| !na.contains(n)).collect();
+    assert_eq!(extra.len(), 1, "{nb:?}");
+    assert!(extra[0].starts_with("syn_tri_00000_") && extra[0].ends_with(".p2qs"), "{extra:?}");
+    for n in na.iter().filter(|n| n.ends_with(".p2qs")) {
+        assert_eq!(std::fs::read(a.join(n)).unwrap(), std::fs::read(b.join(n)).unwrap(), "{n}");
+    }
+    let s = load_sample(&b.join(extra[0])).unwrap();
+    assert!(s.positives() > 0);
+    for d in [a, b] {
+        std::fs::remove_dir_all(d).unwrap();
+    }
+}
+
 #[test]
 fn cli_errors() {
     let out = tmp("err");

@@ -458,3 +458,58 @@ fn a_smaller_min_aspect_stretches_only_the_elongated_shapes() {
     assert!(default_min > 0.2, "default grids reach an edge ratio of {default_min}");
     assert!(narrow_min < 0.2, "min aspect 0.1: grids only reach {narrow_min}");
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// The triangle mesh's conversion to quads (`shapes::triangle_split`) against its
+    /// definition, on every family: a valid, consistently oriented quad mesh with the same
+    /// Euler characteristic, boundary (each border edge split in two) and signed volume;
+    /// the input's vertices first, bit for bit; every other vertex the midpoint of an
+    /// edge of the input's triangles or the centroid of a triangle; 6 quads per quad,
+    /// each a corner, two midpoints and a centroid, planar (all four in one triangle).
+    #[test]
+    fn triangle_split_is_the_triangle_meshs_conversion(seed in 0u64..1_000_000, fam in 0usize..Family::ALL.len()) {
+        let mut rng = Rng::new(seed);
+        let m = shapes::random_shape_of(Family::ALL[fam], &mut rng);
+        let t = shapes::triangle_split(&m, &mut rng);
+        let (s, st) = (check_quad_mesh(&m), check_quad_mesh(&t));
+        prop_assert_eq!(st.euler(), s.euler());
+        prop_assert_eq!(st.boundary_edges, 2 * s.boundary_edges);
+        prop_assert_eq!(st.components, s.components);
+        prop_assert_eq!(t.quads.len(), 6 * m.quads.len());
+        // V' = V + (edges of the triangle mesh) + (its 2F triangles).
+        prop_assert_eq!(t.vertices.len(), s.vertices + (s.edges + m.quads.len()) + 2 * m.quads.len());
+        prop_assert!(t.vertices[..m.vertices.len()] == m.vertices[..]);
+        // Orientation kept: a closed mesh keeps the sign of its volume.
+        if s.boundary_edges == 0 {
+            prop_assert!(signed_volume(&m) * signed_volume(&t) > 0.0);
+        }
+        let mut tri_volume = 0.0;
+        let n0 = m.vertices.len() as u32;
+        let d = bbox_diag(&m);
+        let close = |a: [f64; 3], b: [f64; 3]| (0..3).all(|k| (a[k] - b[k]).abs() <= 1e-12 * d);
+        for q in &t.quads {
+            // Corner first, then a midpoint, the centroid, a midpoint.
+            prop_assert!(q[0] < n0 && q[1..].iter().all(|&v| v >= n0), "{:?}", q);
+            let [a, m1, g, m2] = q.map(|v| t.vertices[v as usize]);
+            // m1 = (a + b) / 2, m2 = (a + c) / 2 for the triangle's other corners b, c,
+            // whose centroid is g = (a + b + c) / 3.
+            let b: [f64; 3] = std::array::from_fn(|k| 2.0 * m1[k] - a[k]);
+            let c: [f64; 3] = std::array::from_fn(|k| 2.0 * m2[k] - a[k]);
+            prop_assert!(close(g, std::array::from_fn(|k| (a[k] + b[k] + c[k]) / 3.0)), "{:?}", q);
+            // b and c are vertices of the input mesh.
+            for p in [b, c] {
+                prop_assert!(m.vertices.iter().any(|&v| close(v, p)), "{:?}", q);
+            }
+            // Each triangle is met once from each of its 3 corners.
+            let cr = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+            tri_volume += (cr[0] * c[0] + cr[1] * c[1] + cr[2] * c[2]) / 18.0;
+        }
+        // The quads are flat (each lies in its triangle): the volume is the triangles'.
+        if s.boundary_edges == 0 {
+            let v = signed_volume(&t);
+            prop_assert!((v - tri_volume).abs() <= 1e-9 * v.abs(), "{} vs {}", v, tri_volume);
+        }
+    }
+}

@@ -858,6 +858,45 @@ fn quad_sj(verts: &[[f64; 3]], q: &[u32; 4]) -> f64 {
     crate::mesh::quality::quad_shape(&q.map(|i| verts[i as usize])).scaled_jacobian
 }
 
+/// A triangle mesh's usual conversion to quads, applied to `mesh` (session 39): every quad
+/// is first cut into two triangles along a random diagonal (one draw from `rng` per quad),
+/// then every triangle (a, b, c) into three quads around its centroid g,
+/// (a, m_ab, g, m_ca), (b, m_bc, g, m_ab), (c, m_ca, g, m_bc), with m_xy the midpoint of
+/// edge xy, shared by the triangles on both sides. The result keeps `mesh`'s vertices
+/// (first, same indices) and orientation, adds one vertex per edge of the triangle mesh
+/// and one per triangle, and has six quads per quad of `mesh`: kites, with a valence-3
+/// vertex at every centroid and valence 6 at the triangles' corners (where the ground
+/// truth of a converted triangle mesh differs most from a remeshed one).
+pub fn triangle_split(mesh: &QuadMesh, rng: &mut Rng) -> QuadMesh {
+    let mut vertices = mesh.vertices.clone();
+    let mut mids: std::collections::HashMap<(u32, u32), u32> = std::collections::HashMap::new();
+    let mut quads = Vec::with_capacity(6 * mesh.quads.len());
+    let avg = |p: &[[f64; 3]]| -> [f64; 3] {
+        let k = p.len() as f64;
+        std::array::from_fn(|d| p.iter().map(|v| v[d]).sum::<f64>() / k)
+    };
+    for q in &mesh.quads {
+        let tris = if rng.below(2) == 0 {
+            [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]
+        } else {
+            [[q[1], q[2], q[3]], [q[1], q[3], q[0]]]
+        };
+        for [a, b, c] in tris {
+            let mut mid = |x: u32, y: u32, vertices: &mut Vec<[f64; 3]>| -> u32 {
+                *mids.entry((x.min(y), x.max(y))).or_insert_with(|| {
+                    vertices.push(avg(&[vertices[x as usize], vertices[y as usize]]));
+                    (vertices.len() - 1) as u32
+                })
+            };
+            let (ab, bc, ca) = (mid(a, b, &mut vertices), mid(b, c, &mut vertices), mid(c, a, &mut vertices));
+            vertices.push(avg(&[vertices[a as usize], vertices[b as usize], vertices[c as usize]]));
+            let g = (vertices.len() - 1) as u32;
+            quads.extend([[a, ab, g, ca], [b, bc, g, ab], [c, ca, g, bc]]);
+        }
+    }
+    QuadMesh { vertices, quads }
+}
+
 /// An irregular copy of `mesh`: every vertex, in index order, moves within its tangent
 /// plane (normal: the sum of its quads' diagonal cross products) by a random offset drawn
 /// uniformly from the disk of radius `amount` × its shortest incident edge (as it was

@@ -219,8 +219,8 @@ impl KpfcnnConfig {
         if !(self.bn_eps.is_finite() && self.bn_eps > 0.0) {
             return bad(format!("bn_eps must be finite and > 0, got {}", self.bn_eps));
         }
-        if !(self.leaky_slope.is_finite() && self.leaky_slope >= 0.0) {
-            return bad(format!("leaky_slope must be finite and ≥ 0, got {}", self.leaky_slope));
+        if !(0.0..=1.0).contains(&self.leaky_slope) {
+            return bad(format!("leaky_slope must be in [0, 1], got {}", self.leaky_slope));
         }
         if self.out_dim == 0 {
             return bad("out_dim must be positive".into());

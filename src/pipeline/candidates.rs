@@ -1160,8 +1160,29 @@ pub const DEFAULT_INSIDE_MARGIN: f32 = 0.05;
 /// 10^8-entry neighbour table. DESIGN §2 finds coverage saturated at k = 20.
 pub const MAX_NEIGHBOURS: usize = 64;
 
-/// `InvalidInput` naming the first neighbour count above [`MAX_NEIGHBOURS`].
+/// Largest `per_point` (and `far_per_point`): DESIGN §2 measures 130–210 of the 560
+/// triples per point passing the filters at k = 16, so 1024 keeps every passing
+/// candidate well beyond the default k, while the candidate list (up to 1024 × #points
+/// before de-duplication) stays a bounded multiple of the cloud.
+pub const MAX_PER_POINT: usize = 1024;
+
+/// `InvalidInput` naming the first neighbour count above [`MAX_NEIGHBOURS`], or a
+/// per-point budget (`per_point`, `far_per_point`) above [`MAX_PER_POINT`] or a
+/// `per_point` of 0 (no candidate at all; until session 39 the library took both, and
+/// `usize::MAX` overflowed in a debug build).
 pub fn check_neighbour_counts(cfg: &CandidateConfig) -> Result<()> {
+    if cfg.per_point == 0 || cfg.per_point > MAX_PER_POINT {
+        return Err(Error::invalid(format!(
+            "candidate setting per_point = {} is outside 1 to {MAX_PER_POINT}",
+            cfg.per_point
+        )));
+    }
+    if cfg.far_per_point > MAX_PER_POINT {
+        return Err(Error::invalid(format!(
+            "candidate setting far_per_point = {} is above {MAX_PER_POINT}",
+            cfg.far_per_point
+        )));
+    }
     for (name, k) in [("k", cfg.k), ("normal_k", cfg.normal_k), ("spacing_k", cfg.spacing_k)] {
         if k > MAX_NEIGHBOURS {
             return Err(Error::invalid(format!(
@@ -2194,6 +2215,30 @@ mod tests {
             }
         }
         assert!(checked > 1000 && tighter > checked / 2, "{checked} checked, {tighter} tighter");
+    }
+
+    /// Budgets outside 1 to `MAX_PER_POINT` are refused with an error naming the
+    /// setting (session 39's audit: `usize::MAX` overflowed in a debug build and 100,000
+    /// ran for seconds to no faces); the bounds themselves are taken.
+    #[test]
+    fn per_point_budgets_are_bounded() {
+        let pts = grid(6, 5, 0.2);
+        for (per_point, far_per_point, ok) in [
+            (0, 0, false),
+            (MAX_PER_POINT + 1, 0, false),
+            (usize::MAX, 0, false),
+            (32, MAX_PER_POINT + 1, false),
+            (32, usize::MAX, false),
+            (1, 0, true),
+            (MAX_PER_POINT, MAX_PER_POINT, true),
+        ] {
+            let cfg = CandidateConfig { per_point, far_per_point, ..CandidateConfig::default() };
+            match generate(&pts, &cfg) {
+                Ok(c) => assert!(ok && !c.is_empty(), "{per_point} / {far_per_point}"),
+                Err(Error::InvalidInput(m)) => assert!(!ok && m.contains("per_point"), "{m}"),
+                Err(e) => panic!("{per_point} / {far_per_point}: {e}"),
+            }
+        }
     }
 
     /// An entry gives back the canonical quad it was made from, for every cyclic order

@@ -229,10 +229,17 @@ impl ModelConfig {
     /// Checks the config's consistency.
     ///
     /// # Errors
-    /// `Error::InvalidInput` naming the problem: a zero width, a point encoder without
-    /// `point_dim` (or the reverse), its `out_dim` differing from `point_dim`, or an
-    /// invalid KPFCNN config.
+    /// `Error::InvalidInput` naming the problem: a zero width, a leaky slope outside
+    /// [0, 1] (a leaky ReLU's; session 39's audit loaded 4294967295 from a forged file,
+    /// which then scored nothing), a point encoder without `point_dim` (or the reverse),
+    /// its `out_dim` differing from `point_dim`, or an invalid KPFCNN config.
     pub fn validate(&self) -> Result<()> {
+        if !(0.0..=1.0).contains(&self.leaky_slope) {
+            return Err(Error::invalid(format!(
+                "model config: leaky_slope {} is outside [0, 1]",
+                self.leaky_slope
+            )));
+        }
         if self.face_widths.contains(&0)
             || self.classifier_widths.contains(&0)
             || self.refine_widths.contains(&0)
@@ -1357,6 +1364,18 @@ mod tests {
         let mut t = ModelConfig::default_preset().to_text();
         t = t.replace("face_widths = 64", "face_widths = 0");
         assert!(ModelConfig::from_text(&t, p).is_err());
+        // A leaky ReLU's slope lies in [0, 1] (session 39's audit loaded 4294967295).
+        let def = ModelConfig::default_preset().to_text();
+        assert!(def.contains("leaky_slope = 0.1\n"));
+        for (slope, ok) in
+            [("4294967295", false), ("1.5", false), ("-0.1", false), ("NaN", false), ("1", true), ("0", true)]
+        {
+            let r = ModelConfig::from_text(
+                &def.replace("leaky_slope = 0.1", &format!("leaky_slope = {slope}")),
+                p,
+            );
+            assert_eq!(r.is_ok(), ok, "{slope}: {r:?}");
+        }
         // `local_frame`: written only when set; a config without it predates it.
         let def = ModelConfig::default_preset().to_text();
         assert!(

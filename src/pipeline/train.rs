@@ -342,7 +342,7 @@ pub fn train(
     let mut reports = Vec::new();
     let mut grads = Grads::new();
     for epoch in start_epoch..cfg.epochs {
-        let t0 = std::time::Instant::now();
+        let t0 = Stopwatch::start();
         let lr = schedule.lr(epoch as f64);
         let mut order: Vec<usize> = groups.iter().map(|g| g[epoch % g.len()]).collect();
         rng.shuffle(&mut order);
@@ -452,7 +452,7 @@ pub fn train(
             loss: loss_sum / order.len() as f64,
             lr,
             val: val_stats,
-            seconds: t0.elapsed().as_secs_f64(),
+            seconds: t0.seconds(),
         };
         progress(Progress::Epoch(&report));
         let state = TrainState {
@@ -490,6 +490,30 @@ pub fn variant_groups(samples: &[Sample], usable: &[usize]) -> Vec<Vec<usize>> {
             g.into_iter().map(|(_, i)| i).collect()
         })
         .collect()
+}
+
+/// Seconds since [`Stopwatch::start`]; always 0 on wasm32, whose `std` has no clock
+/// (`Instant::now` panics there: session 39's audit found training in a browser would).
+struct Stopwatch {
+    #[cfg(not(target_arch = "wasm32"))]
+    t: std::time::Instant,
+}
+
+impl Stopwatch {
+    fn start() -> Stopwatch {
+        Stopwatch {
+            #[cfg(not(target_arch = "wasm32"))]
+            t: std::time::Instant::now(),
+        }
+    }
+    fn seconds(&self) -> f64 {
+        #[cfg(not(target_arch = "wasm32"))]
+        {
+            self.t.elapsed().as_secs_f64()
+        }
+        #[cfg(target_arch = "wasm32")]
+        0.0
+    }
 }
 
 #[cfg(test)]

@@ -45,11 +45,8 @@ A summary (points, candidates, candidates per point, time) goes to stderr.
 /// with the cube of k; DESIGN §2 finds coverage saturated at k = 20).
 pub const MAX_K: usize = point2quad::pipeline::reconstruct::MAX_NEIGHBOURS;
 
-/// Largest `--per-point`: DESIGN §2 measures 130–210 of the 560 triples per point
-/// passing the filters at k = 16, so 1024 keeps every passing candidate well beyond the
-/// default k, while the candidate list (up to 1024 × #points before de-duplication)
-/// stays a bounded multiple of the cloud.
-pub const MAX_PER_POINT: usize = 1024;
+/// Largest `--per-point`: the library's bound.
+pub const MAX_PER_POINT: usize = point2quad::pipeline::candidates::MAX_PER_POINT;
 
 /// Largest `--far` (here, in `reconstruct` and `dataset`): a point's far quads come
 /// from at most 8 × 12 (near, diverse) pairs, so 64 keeps nearly all of them.

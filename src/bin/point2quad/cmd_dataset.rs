@@ -10,6 +10,7 @@ use crate::output::{note, say};
 use point2quad::io::mesh_io::read_mesh;
 use point2quad::mesh::coarsen::{coarsen as coarsen_mesh, CoarsenConfig};
 use point2quad::mesh::poly::QuadMesh;
+use point2quad::mesh::shapes::triangle_split;
 use point2quad::pipeline::candidates::CandidateConfig;
 use point2quad::pipeline::dataset::{
     build_sample_with, index_line, sample_rng, save_sample, stretch_mesh, synthetic_mesh_with_aspect,
@@ -35,6 +36,11 @@ OPTIONS:
     --min-aspect F    the elongated third of the synthetic shapes draws its aspect
                       factor from [F, 1) (0.05 <= F <= 1; default 0.25: quads up to
                       about 4:1; an experiment of session 20, not in the shipped recipe)
+    --tri-split N     N more synthetic samples, each a random synthetic shape (a stream
+                      of their own) converted as a triangle mesh usually is: every quad
+                      cut into two triangles, every triangle into three quads around
+                      its centroid (`synth --triangle-split`; session 39's experiment,
+                      not in the shipped recipe; at most 100000)
     --meshes DIR      every .obj/.off/.ply file directly in DIR (sorted by name)
     --coarsen F[,F2,...]
                       also a coarse copy of each mesh of --meshes, sample NAME@c:
@@ -81,7 +87,7 @@ OPTIONS:
                       a cue no real cloud gives; the shipped weights were trained
                       with index (`make train` asks for it) [least]
 
-At least one of --synthetic and --meshes is needed. A mesh that cannot be read (a
+At least one of --synthetic, --tri-split and --meshes is needed. A mesh that cannot be read (a
 folder or a broken link named like one too), is not pure-quad, has no faces, has a
 face that repeats a corner, or none of whose faces is among its candidates is skipped
 with a warning naming it. The run fails if a sample cannot be written, and then
@@ -89,6 +95,10 @@ removes the samples it wrote (and --out, if it made it). Progress goes to stderr
 line per sample. Sample k (synthetic first, then the meshes in name order) uses its
 own random stream derived from the seed and k.
 ";
+
+/// Mixed into the seed for `--tri-split`'s shapes: a stream apart from `--synthetic`'s, so
+/// the two sets are different shapes.
+const TRI_SPLIT_STREAM: u64 = 0x7472_695f_7370_6c69;
 
 /// Largest `--synthetic`: each sample costs about a second on two cores and writes a
 /// file, so 100,000 is already a day's run; the bound catches typos (and a job list
@@ -120,6 +130,9 @@ enum Job {
     /// A mesh file, stretched by `--stretch` (largest factor), and the sample name
     /// (`NAME@s`, `NAME@s2`, ...).
     Stretch(PathBuf, String, f64),
+    /// Synthetic shape `.0` of the `--tri-split` stream, converted by
+    /// [`triangle_split`]; sample name `syn_tri_<index>_<family>`.
+    TriSplit(usize),
     /// Another draw of the noise points of job `.0` (an index into the jobs): the same
     /// mesh, variant number `.1` (≥ 2), sample name `NAME~v` for that job's `NAME`.
     Variant(usize, usize),
@@ -130,7 +143,7 @@ impl Job {
     fn mesh_path(&self) -> Option<&Path> {
         match self {
             Job::File(path, _) | Job::Coarse(path, _, _) | Job::Stretch(path, _, _) => Some(path),
-            Job::Synthetic(_) | Job::Variant(..) => None,
+            Job::Synthetic(_) | Job::TriSplit(_) | Job::Variant(..) => None,
         }
     }
 }
@@ -174,6 +187,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         valued: &[
             "--out",
             "--synthetic",
+            "--tri-split",
             "--meshes",
             "--noise",
             "--offset",
@@ -222,6 +236,14 @@ pub fn run(argv: &[String]) -> Result<()> {
         0,
         MAX_SYNTHETIC,
         "about a second of work and a file per sample",
+    )?;
+    let tri_split: usize = args.parsed_in(
+        CMD,
+        "--tri-split",
+        0,
+        0,
+        MAX_SYNTHETIC,
+        "about six seconds of work and a file per sample",
     )?;
     let seed: u64 = args.parsed(CMD, "--seed", 0)?;
     let mut cand_cfg = CandidateConfig::default();
@@ -318,6 +340,9 @@ pub fn run(argv: &[String]) -> Result<()> {
             jobs.extend(plain.iter().map(|(p, n)| Job::Stretch(p.clone(), format!("{n}{suffix}"), factor)));
         }
     }
+    // After the plain jobs and the copies, so each of those keeps its index, hence its
+    // random stream and its bytes, with or without --tri-split.
+    jobs.extend((0..tri_split).map(Job::TriSplit));
     // After every other job, so each of those keeps its index, hence its random stream
     // and its bytes, with or without --noise-variants.
     let base_jobs = jobs.len();
@@ -326,7 +351,7 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     if jobs.is_empty() {
         return Err(Error::Usage(format!(
-            "{CMD}: nothing to do: give --synthetic N (N > 0) and/or --meshes DIR with .obj/.off/.ply files"
+            "{CMD}: nothing to do: give --synthetic N or --tri-split N (N > 0) and/or --meshes DIR with .obj/.off/.ply files"
         )));
     }
     let made_out = !out.exists();
@@ -362,6 +387,12 @@ pub fn run(argv: &[String]) -> Result<()> {
         };
         let (name, mesh, rng) = match &jobs[k] {
             Job::Synthetic(i) => synthetic_mesh_with_aspect(seed, *i, bumpy, min_aspect),
+            Job::TriSplit(i) => {
+                let (name, mesh, mut rng) =
+                    synthetic_mesh_with_aspect(seed ^ TRI_SPLIT_STREAM, *i, bumpy, min_aspect);
+                let name = name.replacen("syn_", "syn_tri_", 1);
+                (name, triangle_split(&mesh, &mut rng), rng)
+            }
             Job::File(path, name) | Job::Coarse(path, name, _) | Job::Stretch(path, name, _) => {
                 let mesh = match load_quads(path) {
                     Ok(mesh) => mesh,

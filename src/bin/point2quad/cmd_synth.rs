@@ -7,7 +7,7 @@ use point2quad::io::atomic::commit_all;
 use point2quad::io::mesh_io::{prepare_mesh_with, read_mesh, MeshFormat, WriteOptions};
 use point2quad::io::points::{prepare_points_xyz, PointFormat};
 use point2quad::mesh::poly::PolyMesh;
-use point2quad::mesh::shapes::{random_shape, random_shape_of, Family};
+use point2quad::mesh::shapes::{random_shape, random_shape_of, triangle_split, Family};
 use point2quad::pipeline::noise::{jitter_vertices, noise_points, NoiseConfig};
 use point2quad::rng::Rng;
 use point2quad::{Error, Result};
@@ -18,7 +18,7 @@ point2quad synth: a synthetic quad mesh as a noisy point cloud + its ground trut
 
 USAGE:
     point2quad synth -o CLOUD.xyz [--gt GT.{obj,ply,off}] [OPTIONS]
-    point2quad synth --from MESH -o CLOUD.xyz [--gt GT] [--noise F] [--offset F] [--jitter F] [--seed S]
+    point2quad synth --from MESH -o CLOUD.xyz [--gt GT] [--noise F] [--offset F] [--jitter F] [--seed S] [--triangle-split]
 
 The cloud holds the mesh's vertices, then round(noise × #vertices) noise points, each
 on a random face (area-weighted) moved along its normal by up to offset × the face's
@@ -37,11 +37,15 @@ OPTIONS:
                           mean length of its edges in each coordinate (scanner-like
                           positional noise, 0 <= F <= 1); --gt then writes the moved
                           mesh, whose vertices the cloud starts with [0]
+    --triangle-split      first convert the mesh as a triangle mesh is usually made a
+                          quad mesh: each quad cut into two triangles along a random
+                          diagonal, each triangle into three quads around its centroid
+                          (6 quads per quad; kites with valence-3 centres)
 ";
 
 const SPEC: Spec = Spec {
     valued: &["-o", "--from", "--gt", "--shape", "--seed", "--noise", "--offset", "--jitter"],
-    switches: &[],
+    switches: &["--triangle-split"],
 };
 
 pub fn run(argv: &[String]) -> Result<()> {
@@ -95,6 +99,8 @@ pub fn run(argv: &[String]) -> Result<()> {
         })?;
         random_shape_of(fam, &mut rng)
     };
+    // Drawn after the shape and before the jitter (without the switch, nothing is drawn).
+    let mesh = if a.switch("--triangle-split") { triangle_split(&mesh, &mut rng) } else { mesh };
     // Drawn before the noise points (zero jitter draws nothing: the same cloud as without).
     let mesh = jitter_vertices(&mesh, jitter, &mut rng).map_err(named)?;
     let mut cloud = mesh.vertices.clone();

@@ -540,6 +540,33 @@ fn vertex_faces(m: &PolyMesh) -> Vec<Vec<u32>> {
     out
 }
 
+/// How close two ground-truth vertices must be, as a share of the shorter of their
+/// shortest edges, to count as one (seam copies) in [`compare`]'s face match (besides
+/// [`MATCH_TOLERANCE`]).
+pub const SEAM_SHARE: f64 = 1e-3;
+
+/// Per vertex, its shortest edge (between consecutive corners of a face holding it;
+/// infinite for a vertex no face holds or whose edges are all non-finite).
+fn shortest_edges(m: &PolyMesh) -> Vec<f64> {
+    let mut out = vec![f64::INFINITY; m.vertices.len()];
+    for f in &m.faces {
+        for (k, &a) in f.iter().enumerate() {
+            let b = f[(k + 1) % f.len()];
+            let (Some(&pa), Some(&pb)) = (m.vertices.get(a as usize), m.vertices.get(b as usize)) else {
+                continue;
+            };
+            let d = crate::math::dist_sq(pa, pb).sqrt();
+            if d.is_nan() {
+                continue;
+            }
+            for v in [a, b] {
+                out[v as usize] = out[v as usize].min(d);
+            }
+        }
+    }
+    out
+}
+
 /// Compares a predicted mesh with the ground truth (DESIGN §7): Chamfer distance on
 /// [`CHAMFER_SAMPLES`] area-weighted samples per mesh (deterministic from `seed`;
 /// the two meshes use different streams, so a mesh against itself gives the sampling
@@ -547,7 +574,8 @@ fn vertex_faces(m: &PolyMesh) -> Vec<Vec<u32>> {
 /// [`MATCH_TOLERANCE`] × the ground truth's bounding-box diagonal. A predicted face
 /// counts when its vertices match distinct ground-truth vertices that are exactly the
 /// vertex set of a ground-truth face (ground-truth vertices at one position, within the
-/// tolerance, that share no face count as one vertex: split seams do not hide faces); a
+/// tolerance and within [`SEAM_SHARE`] of their shortest edges, that share no face count
+/// as one vertex: split seams do not hide faces); a
 /// ground-truth face counts as recalled when some counted predicted face has its vertex
 /// set.
 ///
@@ -628,8 +656,13 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
     // Two vertices of one face are never one vertex, however close (a sliver edge;
     // session 34's audit: a mesh scored against itself lost the face), and seam copies
     // never share a face.
+    // Nor are two vertices further apart than SEAM_SHARE of the shorter of their
+    // shortest edges: seam copies sit at one position, while a small object beside a
+    // large one has whole faces within the tolerance (session 39's audit: two spheres
+    // of radii 1 and 1e5, scored against themselves, read P = R = 0.50).
     let faces_of = vertex_faces(gt);
     let share_face = |a: usize, b: usize| faces_of[a].iter().any(|f| faces_of[b].contains(f));
+    let shortest = shortest_edges(&gt_f);
     let search_sq = (4.0 * tol_sq) as f32;
     let canon: Vec<u32> = crate::par::map(gt_pts.len(), |i| {
         let mut near = Vec::new();
@@ -637,7 +670,9 @@ pub fn compare(pred: &PolyMesh, gt: &PolyMesh, seed: u64) -> Result<GtMetrics> {
         near.iter()
             .map(|n| n.index)
             .filter(|&j| {
-                crate::math::dist_sq(gt_pts[i], gt_pts[j as usize]) <= tol_sq && !share_face(i, j as usize)
+                let d_sq = crate::math::dist_sq(gt_pts[i], gt_pts[j as usize]);
+                let seam = SEAM_SHARE * shortest[i].min(shortest[j as usize]);
+                d_sq <= tol_sq && d_sq <= seam * seam && !share_face(i, j as usize)
             })
             .min()
             .map_or(i as u32, |j| j.min(i as u32))
@@ -961,6 +996,50 @@ mod tests {
         welded.vertices[5] = [9.0, 9.0, 9.0];
         let r = compare(&welded, &m, 0).unwrap();
         assert_eq!((r.precision, r.recall), (1.0, 1.0));
+    }
+
+    /// A small object beside a large one: its vertices lie within the tolerance of one
+    /// another but are not seam copies, so a scene scored against itself is perfect
+    /// (session 39's audit: 0.50 at a scale ratio of 1e5), and a prediction that misses
+    /// the small object's faces loses exactly those; a seam copy in the small object
+    /// still counts as one vertex.
+    #[test]
+    fn a_small_object_beside_a_large_one_keeps_its_faces() {
+        for ratio in [1e3, 1e5, 1e8] {
+            let (small, big) = (grid(4, 3), grid(5, 5));
+            let mut scene = small.clone();
+            let off = scene.vertices.len() as u32;
+            scene
+                .vertices
+                .extend(big.vertices.iter().map(|p| [p[0] * ratio + 3.0 * ratio, p[1] * ratio, 0.0]));
+            scene.faces.extend(big.faces.iter().map(|f| f.iter().map(|&v| v + off).collect::<Vec<_>>()));
+            let r = compare(&scene, &scene, 0).unwrap();
+            assert_eq!((r.precision, r.recall), (1.0, 1.0), "ratio {ratio}");
+            // Without the small grid's faces: precision 1, recall 25 of 37.
+            let only_big = PolyMesh { vertices: scene.vertices.clone(), faces: scene.faces[12..].to_vec() };
+            let r = compare(&only_big, &scene, 0).unwrap();
+            assert_eq!(r.precision, 1.0, "ratio {ratio}");
+            assert!(close(r.recall, 25.0 / 37.0), "ratio {ratio}: {}", r.recall);
+            // A split seam in the small grid: faces 0 and 1 no longer share vertices 1 and 6.
+            let mut split = scene.clone();
+            let n = split.vertices.len() as u32;
+            split.vertices.push(split.vertices[1]);
+            split.vertices.push(split.vertices[6]);
+            split.faces[1] = split.faces[1]
+                .iter()
+                .map(|&v| {
+                    if v == 1 {
+                        n
+                    } else if v == 6 {
+                        n + 1
+                    } else {
+                        v
+                    }
+                })
+                .collect();
+            let r = compare(&scene, &split, 0).unwrap();
+            assert_eq!((r.precision, r.recall), (1.0, 1.0), "ratio {ratio}, split seam");
+        }
     }
 
     /// Vertices of one face closer than the matching tolerance stay apart (a sliver

@@ -1527,6 +1527,18 @@ fn synth_triangle_split_converts_the_ground_truth() {
     );
     let faces: Vec<Vec<u32>> = want.quads.iter().map(|q| q.to_vec()).collect();
     assert_eq!(split.faces, faces);
+    // The shipped weights do not know the layout (session 39's audit): the second pass
+    // takes the triangles' centres for noise, and `reconstruct` warns; a plain cloud of
+    // the same mesh gets no such warning. (Weights trained on such meshes may keep the
+    // centres; then the first half of this check has to go.)
+    let (clean, plain) = (s.p("clean.xyz"), s.p("plain.xyz"));
+    ok(&["synth", "--from", &src, "-o", &clean, "--triangle-split", "--noise", "0", "--seed", "3"]);
+    ok(&["synth", "--from", &src, "-o", &plain, "--seed", "3"]);
+    let out_obj = s.p("out.obj");
+    let err = String::from_utf8_lossy(&ok(&["reconstruct", &clean, "-o", &out_obj]).stderr).into_owned();
+    assert!(err.contains("second pass left") && err.contains("triangle mesh split into quads"), "{err}");
+    let err = String::from_utf8_lossy(&ok(&["reconstruct", &plain, "-o", &out_obj]).stderr).into_owned();
+    assert!(!err.contains("second pass left"), "{err}");
 }
 
 /// Session 21's review: a held-out copy takes its noise draws with it; a noise draw cannot

@@ -1476,20 +1476,29 @@ fn resume_reads_the_run_from_the_checkpoint() {
     assert_eq!(read(&s.p("old.p2qm")), read(&straight));
 }
 
+/// `synth --from` [`write_meshes`]'s torus with `extra` options and seed 3: the source
+/// file, the cloud file, the source mesh, the written ground truth and the cloud's points.
+fn synth_from_torus(s: &Scratch, extra: &[&str]) -> (String, String, PolyMesh, PolyMesh, Vec<[f64; 3]>) {
+    let meshes = s.p("meshes");
+    write_meshes(&meshes);
+    let src = s.p("meshes/b_torus.obj");
+    let (cloud, gt) = (s.p("synth.xyz"), s.p("synth.obj"));
+    let mut args = vec!["synth", "--from", &src, "-o", &cloud, "--gt", &gt, "--seed", "3"];
+    args.extend(extra);
+    ok(&args);
+    let orig = point2quad::io::mesh_io::read_mesh(Path::new(&src)).unwrap();
+    let written = point2quad::io::mesh_io::read_mesh(Path::new(&gt)).unwrap();
+    let pts = point2quad::io::points::read_points(Path::new(&cloud)).unwrap();
+    (src, cloud, orig, written, pts)
+}
+
 /// `synth --jitter F` (session 23): the ground truth is the moved mesh, the cloud starts
 /// with its vertices (written back exactly), faces are the source's; `--jitter 0` writes
 /// what no jitter writes.
 #[test]
 fn synth_jitter_moves_the_ground_truth_with_the_cloud() {
     let s = Scratch::new("synth_jitter");
-    let meshes = s.p("meshes");
-    write_meshes(&meshes);
-    let src = s.p("meshes/b_torus.obj");
-    let (cloud, gt) = (s.p("j.xyz"), s.p("j.obj"));
-    ok(&["synth", "--from", &src, "-o", &cloud, "--gt", &gt, "--jitter", "0.05", "--seed", "3"]);
-    let orig = point2quad::io::mesh_io::read_mesh(Path::new(&src)).unwrap();
-    let moved = point2quad::io::mesh_io::read_mesh(Path::new(&gt)).unwrap();
-    let pts = point2quad::io::points::read_points(Path::new(&cloud)).unwrap();
+    let (src, cloud, orig, moved, pts) = synth_from_torus(&s, &["--jitter", "0.05"]);
     assert_eq!(moved.faces, orig.faces);
     assert_eq!(&pts[..moved.vertices.len()], &moved.vertices[..]);
     assert!(pts.len() > moved.vertices.len(), "noise points follow");
@@ -1510,14 +1519,7 @@ fn synth_jitter_moves_the_ground_truth_with_the_cloud() {
 #[test]
 fn synth_triangle_split_converts_the_ground_truth() {
     let s = Scratch::new("synth_tri");
-    let meshes = s.p("meshes");
-    write_meshes(&meshes);
-    let src = s.p("meshes/b_torus.obj");
-    let (cloud, gt) = (s.p("t.xyz"), s.p("t.obj"));
-    ok(&["synth", "--from", &src, "-o", &cloud, "--gt", &gt, "--triangle-split", "--seed", "3"]);
-    let orig = point2quad::io::mesh_io::read_mesh(Path::new(&src)).unwrap();
-    let split = point2quad::io::mesh_io::read_mesh(Path::new(&gt)).unwrap();
-    let pts = point2quad::io::points::read_points(Path::new(&cloud)).unwrap();
+    let (src, _, orig, split, pts) = synth_from_torus(&s, &["--triangle-split"]);
     assert_eq!(split.faces.len(), 6 * orig.faces.len());
     assert_eq!(&split.vertices[..orig.vertices.len()], &orig.vertices[..]);
     assert_eq!(&pts[..split.vertices.len()], &split.vertices[..]);

@@ -3,7 +3,7 @@ CARGO ?= cargo
 BIN := target/release/point2quad
 WASM_TARGET := wasm32-unknown-unknown
 
-.PHONY: all build demo train quality test fmt fmt-check clippy doc wasm nodefault test-debug test-heavy bench coverage clean help
+.PHONY: all build demo train train-trisplit quality test fmt fmt-check clippy doc wasm nodefault test-debug test-heavy bench coverage clean help
 
 all: build
 
@@ -12,6 +12,7 @@ help:
 	@echo "make test   - fmt check, clippy -D warnings, rustdoc -D warnings, no-default-features + wasm builds, all tests"
 	@echo "make bench  - benchmarks (one 'bench <name> <value> <unit>' line per figure)"
 	@echo "make train  - rebuild the shipped weights (scripts/train.sh: data, seed, epochs)"
+	@echo "make train-trisplit - rebuild fixtures/point2quad-trisplit.p2qm (the same with 32 tri-split samples)"
 	@echo "make quality - reconstruct every ../shared/data/quads/eval mesh (10% noise and clean) and tabulate metrics"
 	@echo "make coverage - candidate coverage on synthetic shapes and ../shared/data/quads/train"
 
@@ -24,6 +25,9 @@ demo: build
 
 train: build
 	./scripts/train.sh $(BIN)
+
+train-trisplit: build
+	TRI_SPLIT=32 ./scripts/train.sh $(BIN)
 
 quality: build
 	./scripts/quality_table.sh $(BIN) ../shared/data/quads/eval 0.1

@@ -28,13 +28,21 @@ set -euo pipefail
 BIN=${1:-target/release/point2quad}
 EPOCHS=${EPOCHS:-40}
 DATA=out/train/data_nv3; MODEL=out/train/model.p2qm; REFINED=out/train/refined.p2qm
+FIXTURE=fixtures/point2quad-default.p2qm; EXTRA=()
+# TRI_SPLIT=N (`make train-trisplit`, session 39): the same recipe with N more synthetic
+# samples split as triangle meshes into quads (`dataset --tri-split N`), into
+# fixtures/point2quad-trisplit.p2qm: weights for such meshes, worse on others.
+if [ "${TRI_SPLIT:-0}" != 0 ]; then
+  DATA=out/train/data_tri; MODEL=out/train/model_trisplit.p2qm; REFINED=out/train/refined_trisplit.p2qm
+  FIXTURE=fixtures/point2quad-trisplit.p2qm; EXTRA=(--tri-split "$TRI_SPLIT")
+fi
 mkdir -p out/train
 if [ ! -f "$DATA/index.txt" ]; then
   MESHES=()
   if [ -d ../shared/data/quads/train ]; then MESHES=(--meshes ../shared/data/quads/train --coarsen 0.5);
   else echo "train: ../shared/data/quads/train not found: synthetic data only"; fi
   rm -rf "$DATA"
-  "$BIN" dataset --out "$DATA" --synthetic 80 "${MESHES[@]}" --noise 0.1 --seed 7 --noise-variants 3 --corner-start index
+  "$BIN" dataset --out "$DATA" --synthetic 80 "${EXTRA[@]}" "${MESHES[@]}" --noise 0.1 --seed 7 --noise-variants 3 --corner-start index
 fi
 HOLD=()
 if [ -n "${HOLD_OUT:-}" ]; then
@@ -42,7 +50,7 @@ if [ -n "${HOLD_OUT:-}" ]; then
   # otherwise be resumed, or this one's resumed by it) and never replaces the fixture.
   HOLD=(--hold-out "$HOLD_OUT")
   tag=$(printf '%s' "$HOLD_OUT" | tr -c 'A-Za-z0-9_.-' '_')
-  MODEL=out/train/model_holdout_$tag.p2qm; REFINED=out/train/refined_holdout_$tag.p2qm
+  MODEL=${MODEL%.p2qm}_holdout_$tag.p2qm; REFINED=${REFINED%.p2qm}_holdout_$tag.p2qm
 fi
 # A fresh run chooses the config; a resumed one reads it from its checkpoint.
 START=(--config default --sign-free-normals)
@@ -52,6 +60,6 @@ START=(--config default --sign-free-normals)
 if [ ${#HOLD[@]} -gt 0 ]; then
   echo "train: held-out weights in $REFINED (the fixture is left as it is)"
 else
-  cp "$REFINED" fixtures/point2quad-default.p2qm
-  echo "train: weights copied to fixtures/point2quad-default.p2qm"
+  cp "$REFINED" "$FIXTURE"
+  echo "train: weights copied to $FIXTURE"
 fi

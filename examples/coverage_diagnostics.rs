@@ -837,7 +837,7 @@ fn ranks() {
     let (_, c) = coverage(&pts, &mesh.quads, &cfg);
     let have: HashSet<[u32; 4]> = c.quads.iter().map(key).collect();
     let mut all = cfg.clone();
-    all.per_point = 100000;
+    all.per_point = point2quad::pipeline::candidates::MAX_PER_POINT;
     let (_, ca) = coverage(&pts, &mesh.quads, &all);
     let idx: std::collections::HashMap<[u32; 4], usize> =
         ca.quads.iter().enumerate().map(|(i, q)| (key(q), i)).collect();

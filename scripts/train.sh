@@ -33,7 +33,8 @@ FIXTURE=fixtures/point2quad-default.p2qm; EXTRA=()
 # samples split as triangle meshes into quads (`dataset --tri-split N`), into
 # fixtures/point2quad-trisplit.p2qm: weights for such meshes, worse on others.
 if [ "${TRI_SPLIT:-0}" != 0 ]; then
-  DATA=out/train/data_tri; MODEL=out/train/model_trisplit.p2qm; REFINED=out/train/refined_trisplit.p2qm
+  DATA=out/train/data_tri$TRI_SPLIT; MODEL=out/train/model_trisplit$TRI_SPLIT.p2qm
+  REFINED=out/train/refined_trisplit$TRI_SPLIT.p2qm
   FIXTURE=fixtures/point2quad-trisplit.p2qm; EXTRA=(--tri-split "$TRI_SPLIT")
 fi
 mkdir -p out/train

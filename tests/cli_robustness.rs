@@ -425,13 +425,27 @@ fn help_for_every_subcommand() {
         }
         // `help COMMAND` prints what `COMMAND --help` prints (not the overview).
         let own = p2q(&[cmd, "--help"]);
-        for args in [vec!["help", cmd], vec!["--quiet", "help", cmd]] {
+        for args in [
+            vec!["help", cmd],
+            vec!["--quiet", "help", cmd],
+            vec!["--threads", "2", "help", cmd],
+            vec!["help", "--threads", "2", cmd],
+            vec!["help", "--threads=2", cmd],
+        ] {
             let out = p2q(&args);
             assert_eq!(out.status.code(), Some(0), "{args:?}: {}", stderr(&out));
             assert_eq!(out.stdout, own.stdout, "{args:?}");
         }
     }
     assert_fails(&p2q(&["help", "frobnicate"]), 2, &["unknown command", "frobnicate"], "help frobnicate");
+    // Global options before `help` or `--help` are not its topic: the overview.
+    for args in
+        [vec!["--threads", "4", "--help"], vec!["--threads", "4", "help"], vec!["help", "--threads", "4"]]
+    {
+        let out = p2q(&args);
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {}", stderr(&out));
+        assert!(String::from_utf8_lossy(&out.stdout).contains("COMMANDS:"), "{args:?}");
+    }
 }
 
 /// Every number in an `eval --json` object, checked finite (no `null` standing in

@@ -545,13 +545,18 @@ fn vertex_faces(m: &PolyMesh) -> Vec<Vec<u32>> {
 /// [`MATCH_TOLERANCE`]).
 pub const SEAM_SHARE: f64 = 1e-3;
 
-/// Per vertex, its shortest edge (between consecutive corners of a face holding it;
-/// infinite for a vertex no face holds or whose edges are all non-finite).
+/// Per vertex, its shortest edge (between consecutive distinct corners of a face holding
+/// it; infinite for a vertex no face holds or whose edges are all non-finite).
 fn shortest_edges(m: &PolyMesh) -> Vec<f64> {
     let mut out = vec![f64::INFINITY; m.vertices.len()];
     for f in &m.faces {
         for (k, &a) in f.iter().enumerate() {
             let b = f[(k + 1) % f.len()];
+            // A repeated corner is no edge (its length 0 would make the vertex's seam
+            // copies merge only when bit-identical).
+            if a == b {
+                continue;
+            }
             let (Some(&pa), Some(&pb)) = (m.vertices.get(a as usize), m.vertices.get(b as usize)) else {
                 continue;
             };
@@ -1040,6 +1045,17 @@ mod tests {
             let r = compare(&scene, &split, 0).unwrap();
             assert_eq!((r.precision, r.recall), (1.0, 1.0), "ratio {ratio}, split seam");
         }
+    }
+
+    /// A repeated corner is no edge of length 0 (it would leave the vertex's seam copies
+    /// merging only when bit-identical); faces out of range or non-finite are skipped.
+    #[test]
+    fn shortest_edges_skip_repeated_corners() {
+        let m = PolyMesh {
+            vertices: vec![[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 3.0, 0.0], [f64::NAN, 0.0, 0.0], [9.0; 3]],
+            faces: vec![vec![0, 1, 2, 2], vec![0, 3, 1, 7]],
+        };
+        assert_eq!(shortest_edges(&m), vec![2.0, 2.0, 3.0, f64::INFINITY, f64::INFINITY]);
     }
 
     /// Vertices of one face closer than the matching tolerance stay apart (a sliver

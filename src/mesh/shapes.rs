@@ -865,8 +865,9 @@ fn quad_sj(verts: &[[f64; 3]], q: &[u32; 4]) -> f64 {
 /// edge xy, shared by the triangles on both sides. The result keeps `mesh`'s vertices
 /// (first, same indices) and orientation, adds one vertex per edge of the triangle mesh
 /// and one per triangle, and has six quads per quad of `mesh`: kites, with a valence-3
-/// vertex at every centroid and valence 6 at the triangles' corners (where the ground
-/// truth of a converted triangle mesh differs most from a remeshed one).
+/// vertex at every centroid, valence 4 at interior midpoints, and the triangle mesh's
+/// valence (6 on average inside) at its corners, where the ground truth of a converted
+/// triangle mesh differs most from a remeshed one.
 pub fn triangle_split(mesh: &QuadMesh, rng: &mut Rng) -> QuadMesh {
     let mut vertices = mesh.vertices.clone();
     let mut mids: std::collections::HashMap<(u32, u32), u32> = std::collections::HashMap::new();

@@ -162,7 +162,8 @@ pub struct ReconstructReport {
     pub postprocess: Option<PostprocessReport>,
     /// Faces in the output.
     pub faces: usize,
-    /// Vertices added by hole filling.
+    /// Vertices added by the post-process (hole filling, the closing) and by
+    /// `--watertight`'s closing ([`ReconstructReport::watertight`] counts those apart).
     pub vertices_added: usize,
     /// Points left out as exact or near duplicates of an earlier point (in the output
     /// they are isolated vertices; faces use the first of each group).

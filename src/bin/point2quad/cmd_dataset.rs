@@ -36,11 +36,13 @@ OPTIONS:
     --min-aspect F    the elongated third of the synthetic shapes draws its aspect
                       factor from [F, 1) (0.05 <= F <= 1; default 0.25: quads up to
                       about 4:1; an experiment of session 20, not in the shipped recipe)
-    --tri-split N     N more synthetic samples, each a random synthetic shape (a stream
-                      of their own) converted as a triangle mesh usually is: every quad
-                      cut into two triangles, every triangle into three quads around
-                      its centroid (`synth --triangle-split`; session 39's experiment,
-                      not in the shipped recipe; at most 100000)
+    --tri-split N     N more synthetic samples, syn_tri_<i>_<family>, each a random
+                      synthetic shape (from a stream of their own; --bumpy and
+                      --min-aspect apply) converted as a triangle mesh usually is:
+                      every quad cut into two triangles, every triangle into three
+                      quads around its centroid (`synth --triangle-split`; not in the
+                      default weights' recipe: `make train-trisplit` uses 32; at most
+                      100000)
     --meshes DIR      every .obj/.off/.ply file directly in DIR (sorted by name)
     --coarsen F[,F2,...]
                       also a coarse copy of each mesh of --meshes, sample NAME@c:
@@ -92,8 +94,9 @@ folder or a broken link named like one too), is not pure-quad, has no faces, has
 face that repeats a corner, or none of whose faces is among its candidates is skipped
 with a warning naming it. The run fails if a sample cannot be written, and then
 removes the samples it wrote (and --out, if it made it). Progress goes to stderr, one
-line per sample. Sample k (synthetic first, then the meshes in name order) uses its
-own random stream derived from the seed and k.
+line per sample. Sample k (synthetic first, then the meshes in name order, their
+copies, then the --tri-split samples) uses its own random stream derived from the seed
+and k (the --tri-split shapes: from the seed and their own number).
 ";
 
 /// Mixed into the seed for `--tri-split`'s shapes: a stream apart from `--synthetic`'s, so

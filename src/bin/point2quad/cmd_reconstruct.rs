@@ -531,7 +531,8 @@ pub fn run(argv: &[String]) -> Result<()> {
             "reconstruct: warning: {}: the second pass left {d} of {usable} points out as noise (more than a \
              fifth); if they are vertices of the mesh, its layout is one the weights do not know, such as a \
              triangle mesh split into quads around the triangles' centres (README, \"Where it fails\"), for \
-             which the project has weights of its own: `--model fixtures/point2quad-trisplit.p2qm`\n",
+             which the project has weights of its own: `--model fixtures/point2quad-trisplit.p2qm` (a file \
+             of the source tree)\n",
             input.display()
         ));
     }

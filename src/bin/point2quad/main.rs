@@ -99,8 +99,22 @@ fn main() -> ExitCode {
     let rest = &rest[..];
     let (help, run): (&str, RunFn) = match cmd.as_str() {
         "-h" | "--help" | "help" => {
-            // `point2quad help COMMAND` is `point2quad COMMAND --help`.
-            let topic = rest.iter().find(|a| !a.starts_with('-'));
+            // `point2quad help COMMAND` is `point2quad COMMAND --help`: the first word after
+            // `help` that is no global option or its value.
+            let mut after = argv[at + 1..].iter();
+            let mut topic = None;
+            while let Some(a) = after.next() {
+                match a.as_str() {
+                    "--threads" => {
+                        after.next();
+                    }
+                    a if a.starts_with('-') => {}
+                    _ => {
+                        topic = Some(a);
+                        break;
+                    }
+                }
+            }
             return match topic.map(|t| (t, command(t))) {
                 None => {
                     let _ = output::stdout(USAGE);

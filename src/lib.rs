@@ -2,6 +2,7 @@
 //! (Point2Quad, Li et al.), on a from-scratch engine: tensors with reverse-mode
 //! autodiff, KPConv, a kd-tree and a half-edge quad mesh. See `README.md`.
 
+mod clock;
 pub mod error;
 pub mod math;
 pub mod par;

@@ -198,8 +198,9 @@ fn cli_is_deterministic_and_writes_an_index() {
     }
 }
 
-/// `--tri-split N` adds samples after the others, which keep their bytes; each is a
-/// synthetic shape converted as `synth --triangle-split` converts it (a stream of its own).
+/// `--tri-split N` adds N samples, `syn_tri_<i>_<family>`, with true faces among their
+/// candidates, after the others, which keep their bytes. (The conversion itself is
+/// tested against its definition in `shapes_props`.)
 #[test]
 fn cli_tri_split_samples_leave_the_others_alone() {
     let (a, b) = (tmp("tri_a"), tmp("tri_b"));

@@ -1660,8 +1660,9 @@ fn proposals(
 /// `InvalidInput` for fewer than 4 points or a non-finite coordinate (naming the
 /// point), for a neighbour count (`k`, `normal_k`, `spacing_k`, `far_k`) above
 /// [`MAX_NEIGHBOURS`], and for a `per_point` outside 1 to [`MAX_PER_POINT`] or a
-/// `far_per_point` above it ([`check_neighbour_counts`]). Degenerate clouds (collinear, coplanar, duplicates) are not
-/// errors: coplanar is an open surface and gets candidates, collinear gets none.
+/// `far_per_point` above it ([`check_neighbour_counts`]). Degenerate clouds (collinear,
+/// coplanar, duplicates) are not errors: coplanar is an open surface and gets
+/// candidates, collinear gets none.
 pub fn generate(points: &[[f32; 3]], cfg: &CandidateConfig) -> Result<Candidates> {
     check_neighbour_counts(cfg)?;
     validate(points)?;

@@ -1377,7 +1377,6 @@ mod tests {
             assert_eq!(r.is_ok(), ok, "{slope}: {r:?}");
         }
         // `local_frame`: written only when set; a config without it predates it.
-        let def = ModelConfig::default_preset().to_text();
         assert!(
             def.contains("local_frame = true\n") && !ModelConfig::paper().to_text().contains("local_frame")
         );

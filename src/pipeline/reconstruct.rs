@@ -966,8 +966,7 @@ fn distinct_points(points: &[[f64; 3]]) -> Vec<u32> {
 
 /// Times the stages and tells the observer of [`reconstruct_observed`] as each ends.
 struct Clock<'a> {
-    #[cfg(not(target_arch = "wasm32"))]
-    t: std::time::Instant,
+    t: crate::clock::Stopwatch,
     /// 2 while the second pass scores its cloud, else 1.
     pass: u8,
     observer: &'a mut dyn FnMut(StageDone),
@@ -975,12 +974,7 @@ struct Clock<'a> {
 
 impl<'a> Clock<'a> {
     fn new(observer: &'a mut dyn FnMut(StageDone)) -> Clock<'a> {
-        Clock {
-            #[cfg(not(target_arch = "wasm32"))]
-            t: std::time::Instant::now(),
-            pass: 1,
-            observer,
-        }
+        Clock { t: crate::clock::Stopwatch::start(), pass: 1, observer }
     }
     /// Records the time since the last lap (0 on wasm32, which has no clock).
     fn lap(&mut self, report: &mut ReconstructReport, stage: &'static str) {
@@ -989,15 +983,7 @@ impl<'a> Clock<'a> {
     }
     /// Seconds since the last lap or split, restarting the count (0 on wasm32).
     fn split(&mut self) -> f64 {
-        #[cfg(not(target_arch = "wasm32"))]
-        {
-            let now = std::time::Instant::now();
-            let t = (now - self.t).as_secs_f64();
-            self.t = now;
-            t
-        }
-        #[cfg(target_arch = "wasm32")]
-        0.0
+        self.t.split()
     }
     /// Records a stage's time, measured by [`Clock::split`]s, and tells the observer.
     fn record(&mut self, report: &mut ReconstructReport, stage: &'static str, seconds: f64) {

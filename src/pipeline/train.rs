@@ -342,7 +342,8 @@ pub fn train(
     let mut reports = Vec::new();
     let mut grads = Grads::new();
     for epoch in start_epoch..cfg.epochs {
-        let t0 = Stopwatch::start();
+        // No clock on wasm32 (session 39's audit: `Instant::now` panics there).
+        let t0 = crate::clock::Stopwatch::start();
         let lr = schedule.lr(epoch as f64);
         let mut order: Vec<usize> = groups.iter().map(|g| g[epoch % g.len()]).collect();
         rng.shuffle(&mut order);
@@ -490,30 +491,6 @@ pub fn variant_groups(samples: &[Sample], usable: &[usize]) -> Vec<Vec<usize>> {
             g.into_iter().map(|(_, i)| i).collect()
         })
         .collect()
-}
-
-/// Seconds since [`Stopwatch::start`]; always 0 on wasm32, whose `std` has no clock
-/// (`Instant::now` panics there: session 39's audit found training in a browser would).
-struct Stopwatch {
-    #[cfg(not(target_arch = "wasm32"))]
-    t: std::time::Instant,
-}
-
-impl Stopwatch {
-    fn start() -> Stopwatch {
-        Stopwatch {
-            #[cfg(not(target_arch = "wasm32"))]
-            t: std::time::Instant::now(),
-        }
-    }
-    fn seconds(&self) -> f64 {
-        #[cfg(not(target_arch = "wasm32"))]
-        {
-            self.t.elapsed().as_secs_f64()
-        }
-        #[cfg(target_arch = "wasm32")]
-        0.0
-    }
 }
 
 #[cfg(test)]

@@ -89,10 +89,10 @@ OPTIONS:
                       a cue no real cloud gives; the shipped weights were trained
                       with index (`make train` asks for it) [least]
 
-At least one of --synthetic, --tri-split and --meshes is needed. A mesh that cannot be read (a
-folder or a broken link named like one too), is not pure-quad, has no faces, has a
-face that repeats a corner, or none of whose faces is among its candidates is skipped
-with a warning naming it. The run fails if a sample cannot be written, and then
+At least one of --synthetic, --tri-split and --meshes is needed. A mesh that cannot
+be read (a folder or a broken link named like one too), is not pure-quad, has no
+faces, has a face that repeats a corner, or none of whose faces is among its
+candidates is skipped with a warning naming it. The run fails if a sample cannot be written, and then
 removes the samples it wrote (and --out, if it made it). Progress goes to stderr, one
 line per sample. Sample k (synthetic first, then the meshes in name order, their
 copies, then the --tri-split samples) uses its own random stream derived from the seed

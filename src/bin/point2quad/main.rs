@@ -100,21 +100,10 @@ fn main() -> ExitCode {
     let (help, run): (&str, RunFn) = match cmd.as_str() {
         "-h" | "--help" | "help" => {
             // `point2quad help COMMAND` is `point2quad COMMAND --help`: the first word after
-            // `help` that is no global option or its value.
-            let mut after = argv[at + 1..].iter();
-            let mut topic = None;
-            while let Some(a) = after.next() {
-                match a.as_str() {
-                    "--threads" => {
-                        after.next();
-                    }
-                    a if a.starts_with('-') => {}
-                    _ => {
-                        topic = Some(a);
-                        break;
-                    }
-                }
-            }
+            // `help` that is no global option or its value (help with a bad global option
+            // is the overview).
+            let after = take_globals(cmd, &argv[at + 1..]).map(|(_, _, rest)| rest).unwrap_or_default();
+            let topic = after.iter().find(|a| !a.starts_with('-')).map(String::as_str);
             return match topic.map(|t| (t, command(t))) {
                 None => {
                     let _ = output::stdout(USAGE);

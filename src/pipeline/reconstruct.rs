@@ -45,9 +45,9 @@ pub struct ReconstructConfig {
     /// exact duplicates only.
     pub merge_share: f32,
     /// A second pass without the points the first pass's mesh says are noise
-    /// ([`SecondPass`]); `None` runs one pass. Default (session 26): τ 0.25,
-    /// [`SecondPassMode::Average`], [`SecondPassCover::Believed`]. Part of the
-    /// post-process: ignored when `run_postprocess` is false.
+    /// ([`SecondPass`]); `None` runs one pass. Default: τ 0.25,
+    /// [`SecondPassMode::Average`] (session 26), [`SecondPassCover::Learned`] (since
+    /// session 35). Part of the post-process: ignored when `run_postprocess` is false.
     pub second_pass: Option<SecondPass>,
     /// After the post-process (and the second pass), close every hole, odd ones paired
     /// by split strips of the least believed faces, even ones filled with new vertices

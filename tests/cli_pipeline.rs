@@ -752,6 +752,59 @@ fn reconstruct_second_pass_option() {
     assert!(!Path::new(&never).exists());
 }
 
+/// `reconstruct --drop-unused`: the output holds only the points some face uses, in
+/// input order, with the same faces (compared by their corners' coordinates) as the
+/// default output, whose unused points (noise, a duplicate, a far outlier) are isolated
+/// vertices; `eval` scores both alike; with `--no-postprocess` too.
+#[test]
+fn reconstruct_drop_unused_leaves_out_isolated_vertices() {
+    let s = Scratch::new("drop_unused");
+    let cloud = s.p("cloud.xyz");
+    ok(&["synth", "--shape", "torus", "-o", &cloud, "--noise", "0.1", "--seed", "5"]);
+    // A duplicate of the first point and a far outlier, both unused by any face.
+    let text = std::fs::read_to_string(&cloud).unwrap();
+    let first = text.lines().find(|l| !l.starts_with('#') && !l.trim().is_empty()).unwrap().to_string();
+    std::fs::write(&cloud, format!("{text}{first}\n1e9 1e9 1e9\n")).unwrap();
+    let read = |m: &str| point2quad::io::mesh_io::read_mesh(Path::new(m)).unwrap().to_quads().unwrap();
+    let corners = |q: &point2quad::mesh::poly::QuadMesh| {
+        let mut f: Vec<Vec<[u64; 3]>> = q
+            .quads
+            .iter()
+            .map(|f| f.iter().map(|&v| q.vertices[v as usize].map(f64::to_bits)).collect())
+            .collect();
+        f.sort();
+        f
+    };
+    for extra in [&[][..], &["--no-postprocess"][..]] {
+        let (full, compact) = (s.p("full.obj"), s.p("compact.obj"));
+        ok(&[&["reconstruct", &cloud, "-o", &full][..], extra].concat());
+        let out = ok(&[&["reconstruct", &cloud, "-o", &compact, "--drop-unused"][..], extra].concat());
+        let (f, c) = (read(&full), read(&compact));
+        let mut used = vec![false; f.vertices.len()];
+        f.quads.iter().flatten().for_each(|&v| used[v as usize] = true);
+        let unused = used.iter().filter(|u| !**u).count();
+        assert!(unused >= 2, "{extra:?}: the test needs unused points ({unused})");
+        // The kept vertices are the used ones, in order; every one is a corner.
+        let kept: Vec<[f64; 3]> =
+            f.vertices.iter().zip(&used).filter(|(_, u)| **u).map(|(v, _)| *v).collect();
+        assert_eq!(c.vertices, kept, "{extra:?}");
+        let mut c_used = vec![false; c.vertices.len()];
+        c.quads.iter().flatten().for_each(|&v| c_used[v as usize] = true);
+        assert!(c_used.iter().all(|u| *u), "{extra:?}: an isolated vertex is left");
+        assert_eq!(corners(&c), corners(&f), "{extra:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(&format!("--drop-unused: {unused} of {} vertices", f.vertices.len())), "{err}");
+        if extra.is_empty() {
+            let score = |m: &str| {
+                let out = ok(&["eval", m, "--gt", &full, "--json"]);
+                let j = parse_json(String::from_utf8_lossy(&out.stdout).trim()).unwrap();
+                (j.get("precision").and_then(Json::num), j.get("recall").and_then(Json::num))
+            };
+            assert_eq!(score(&compact), (Some(1.0), Some(1.0)));
+        }
+    }
+}
+
 /// `train --init`: a fine-tune starts from the given weights (their config, epoch 1 of
 /// its own count); a refined model's rounds are dropped with a message; combinations with
 /// --resume or --config are usage errors, a missing file a data error naming it. And

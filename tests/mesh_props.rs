@@ -81,6 +81,32 @@ fn faces_waiting_on_each_other_in_the_suite_go_in() {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
+    /// `QuadMesh::without_unused` against its definition, brute force: the kept indices
+    /// are exactly the used ones, ascending; each kept vertex is its original; each quad
+    /// maps back to the original quad corner for corner.
+    #[test]
+    fn without_unused_matches_brute_force(
+        n in 1usize..40,
+        raw in prop::collection::vec(prop::array::uniform4(0usize..1000), 0..30),
+    ) {
+        use point2quad::mesh::poly::QuadMesh;
+        let vertices: Vec<[f64; 3]> = (0..n).map(|i| [i as f64, (i * i) as f64, -(i as f64)]).collect();
+        let quads: Vec<[u32; 4]> = raw.iter().map(|q| q.map(|v| (v % n) as u32)).collect();
+        let m = QuadMesh { vertices: vertices.clone(), quads: quads.clone() };
+        let (c, kept) = m.without_unused();
+        let used: Vec<u32> =
+            (0..n as u32).filter(|v| quads.iter().any(|q| q.contains(v))).collect();
+        prop_assert_eq!(&kept, &used);
+        prop_assert_eq!(c.vertices.len(), kept.len());
+        for (k, &orig) in kept.iter().enumerate() {
+            prop_assert_eq!(c.vertices[k], vertices[orig as usize]);
+        }
+        prop_assert_eq!(c.quads.len(), quads.len());
+        for (cq, q) in c.quads.iter().zip(&quads) {
+            prop_assert_eq!(cq.map(|v| kept[v as usize]), *q);
+        }
+    }
+
     /// Any order, any orientation: every face goes in (see [`builds_whole_in_random_order`]).
     #[test]
     fn random_order_and_orientation_builds_the_whole_mesh(seed in any::<u64>()) {

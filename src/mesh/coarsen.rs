@@ -292,7 +292,7 @@ pub fn coarsen(mesh: &QuadMesh, cfg: &CoarsenConfig, rng: &mut Rng) -> QuadMesh 
             break;
         }
     }
-    compact(&pos, &quads)
+    QuadMesh { vertices: pos, quads }.without_unused().0
 }
 
 /// Mean over the chord's faces of (rung + rung) / (side + side): above 1 the strip's
@@ -307,25 +307,6 @@ pub fn aspect(pos: &[[f64; 3]], quads: &[[u32; 4]], ch: &[(usize, usize)]) -> f6
         sum += if side > 0.0 { (e(0) + e(2)) / side } else { f64::INFINITY };
     }
     sum / ch.len().max(1) as f64
-}
-
-/// The mesh over the vertices `quads` uses, in their original order.
-fn compact(pos: &[[f64; 3]], quads: &[[u32; 4]]) -> QuadMesh {
-    let mut new_index = vec![u32::MAX; pos.len()];
-    for q in quads {
-        for &v in q {
-            new_index[v as usize] = 0;
-        }
-    }
-    let mut vertices = Vec::new();
-    for (i, slot) in new_index.iter_mut().enumerate() {
-        if *slot == 0 {
-            *slot = vertices.len() as u32;
-            vertices.push(pos[i]);
-        }
-    }
-    let quads = quads.iter().map(|q| q.map(|v| new_index[v as usize])).collect();
-    QuadMesh { vertices, quads }
 }
 
 #[cfg(test)]

@@ -54,6 +54,32 @@ impl PolyMesh {
     }
 }
 
+impl QuadMesh {
+    /// The mesh over the vertices its quads use, in their original order, and for each
+    /// kept vertex its index in `self` (strictly increasing). Vertices no quad uses
+    /// (the noise points a reconstruction leaves, for one) are dropped; quads keep their
+    /// order and corner order, renumbered. An index out of range is the caller's bug
+    /// and panics, as indexing does.
+    pub fn without_unused(&self) -> (QuadMesh, Vec<u32>) {
+        let mut new_index = vec![u32::MAX; self.vertices.len()];
+        for q in &self.quads {
+            for &v in q {
+                new_index[v as usize] = 0;
+            }
+        }
+        let (mut vertices, mut kept) = (Vec::new(), Vec::new());
+        for (i, slot) in new_index.iter_mut().enumerate() {
+            if *slot == 0 {
+                *slot = vertices.len() as u32;
+                vertices.push(self.vertices[i]);
+                kept.push(i as u32);
+            }
+        }
+        let quads = self.quads.iter().map(|q| q.map(|v| new_index[v as usize])).collect();
+        (QuadMesh { vertices, quads }, kept)
+    }
+}
+
 impl From<&QuadMesh> for PolyMesh {
     fn from(q: &QuadMesh) -> Self {
         PolyMesh { vertices: q.vertices.clone(), faces: q.quads.iter().map(|f| f.to_vec()).collect() }
@@ -73,5 +99,17 @@ mod tests {
         m.faces.pop();
         assert!(m.is_quad_only());
         assert_eq!(PolyMesh::from(&m.to_quads().unwrap()), m);
+    }
+
+    #[test]
+    fn without_unused_keeps_the_used_vertices_in_order() {
+        let v = |i: u32| [i as f64, 0.0, 0.0];
+        let m = QuadMesh { vertices: (0..8).map(v).collect(), quads: vec![[6, 1, 3, 4], [1, 6, 7, 3]] };
+        let (c, kept) = m.without_unused();
+        assert_eq!(kept, vec![1, 3, 4, 6, 7]);
+        assert_eq!(c.vertices, vec![v(1), v(3), v(4), v(6), v(7)]);
+        assert_eq!(c.quads, vec![[3, 0, 1, 2], [0, 3, 4, 1]]);
+        let empty = QuadMesh { vertices: vec![[0.0; 3]; 3], quads: vec![] };
+        assert_eq!(empty.without_unused(), (QuadMesh::default(), vec![]));
     }
 }

@@ -35,7 +35,8 @@ INPUT is a point cloud (.xyz/.txt/.pts/.csv, .ply, .obj or .off; only positions 
 read; a first line of column names is a header: columns named x, y, z are read
 wherever they are, else the first three), at any scale, pose or offset. The output
 mesh's vertices are the input points, written back exactly and in input order (points
-no face uses stay as isolated vertices), then any vertices hole filling added.
+no face uses stay as isolated vertices, unless --drop-unused), then any vertices hole
+filling added.
 Duplicate and near-duplicate points count once (faces use the first of each group),
 and far outliers (more than 10,000 times the cloud's radius away) are left out; both
 are reported and stay in the output as isolated vertices. The order of the points does
@@ -48,6 +49,11 @@ OPTIONS:
                           candidate and their probabilities are averaged
                           [the shipped weights]
     --svg PREVIEW.svg     also write a shaded SVG picture of the result
+    --drop-unused         leave the points no face uses (noise, strays, duplicates) out
+                          of the output; the kept points stay in input order, so the
+                          output's vertex i is the i-th point some face uses (default:
+                          every input point is written, unused ones as isolated
+                          vertices, so indices match the input)
     --rounds N            run at most the first N of the model's refinement rounds,
                           0 to 8: the probabilities the model refined with N rounds
                           gives (default: all; the shipped weights have 6)
@@ -165,6 +171,7 @@ const SPEC: Spec = Spec {
         "--no-untangle",
         "--progress",
         "--watertight",
+        "--drop-unused",
     ],
 };
 
@@ -288,8 +295,11 @@ pub fn run(argv: &[String]) -> Result<()> {
             "--second-pass-cover",
             "--watertight-max-loop",
         ];
-        // Every switch but these two sets a post-process step.
-        let mut switches = SPEC.switches.iter().filter(|o| !matches!(**o, "--no-postprocess" | "--progress"));
+        // Every switch but these three sets a post-process step.
+        let mut switches = SPEC
+            .switches
+            .iter()
+            .filter(|o| !matches!(**o, "--no-postprocess" | "--progress" | "--drop-unused"));
         let given = valued.iter().find(|o| a.value(o).is_some()).or(switches.find(|o| a.switch(o)));
         if let Some(opt) = given {
             return Err(Error::Usage(format!(
@@ -420,7 +430,8 @@ pub fn run(argv: &[String]) -> Result<()> {
         other => other,
     })?;
     let t1 = std::time::Instant::now();
-    let poly = PolyMesh::from(&mesh);
+    let drop_unused = a.switch("--drop-unused");
+    let poly = if drop_unused { PolyMesh::from(&mesh.without_unused().0) } else { PolyMesh::from(&mesh) };
     // Both files are written in full before either replaces its target: half a result
     // is worse than none, and a failed preview must not cost the old content of `-o`.
     let mut staged = vec![prepare_mesh_with(&out, &poly, &WriteOptions::default())?];
@@ -466,6 +477,13 @@ pub fn run(argv: &[String]) -> Result<()> {
         crate::output::info(&format!(
             "reconstruct: watertight: {} odd loop pair(s) joined by splitting {} face(s), {} loop(s) filled with {} quad(s) (the longest {} edges), {} new vertices in all, {} loop(s) left open\n",
             w.odd_pairs, w.faces_split, w.loops_filled, w.quads_added, w.longest_loop, w.vertices_added, w.loops_left
+        ));
+    }
+    if drop_unused {
+        crate::output::info(&format!(
+            "reconstruct: --drop-unused: {} of {} vertices no face uses left out of the output\n",
+            mesh.vertices.len() - poly.vertices.len(),
+            mesh.vertices.len()
         ));
     }
     if cfg.second_pass.is_some() && cfg.run_postprocess {

@@ -9,6 +9,9 @@
 # ground truth is then the mesh synth writes (--gt), not the file in MESH_DIR.
 # SHUFFLE=S shuffles each cloud's points (seed S) before reconstructing: synth writes the
 # mesh's vertices first and noise points last, an order no scanner gives (session 30).
+# POSE=S moves each cloud and its ground truth alike by a random rotation, a uniform scale
+# 10^U(-3, 3) and an offset of up to 1000 times that scale per axis (seed S and the mesh's
+# name; session 40): the same table in another pose, scale and place.
 # Example: scripts/quality_table.sh target/release/point2quad ../shared/data/quads/eval 0.1
 set -euo pipefail
 BIN=$1; DIR=$2; NOISE=${3:-0.1}; MODEL=${4:-}; OUT=${5:-out/quality}
@@ -18,8 +21,39 @@ for f in "$DIR"/*.obj "$DIR"/*.off "$DIR"/*.ply; do
   [ -e "$f" ] || continue
   name=$(basename "${f%.*}")
   ref=$f
-  if [ -n "${SYNTH_ARGS:-}" ]; then ref=$OUT/$name.gt.obj; fi
-  "$BIN" synth --from "$f" --noise "$NOISE" --seed 1 -o "$OUT/$name.xyz" ${SYNTH_ARGS:+--gt "$ref"} ${SYNTH_ARGS:-} 2>/dev/null
+  gtarg=()
+  if [ -n "${SYNTH_ARGS:-}${POSE:-}" ]; then ref=$OUT/$name.gt.obj; gtarg=(--gt "$ref"); fi
+  "$BIN" synth --from "$f" --noise "$NOISE" --seed 1 -o "$OUT/$name.xyz" "${gtarg[@]}" ${SYNTH_ARGS:-} 2>/dev/null
+  if [ -n "${POSE:-}" ]; then
+    python3 - "$OUT/$name.xyz" "$ref" "$POSE" "$name" <<'PY'
+import math, random, sys
+cloud, gt, seed, name = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4]
+r = random.Random(f"{seed}:{name}")
+q = [r.gauss(0, 1) for _ in range(4)]
+n = math.sqrt(sum(x * x for x in q))
+a, b, c, d = (x / n for x in q)
+R = [[a*a + b*b - c*c - d*d, 2*(b*c - a*d), 2*(b*d + a*c)],
+     [2*(b*c + a*d), a*a - b*b + c*c - d*d, 2*(c*d - a*b)],
+     [2*(b*d - a*c), 2*(c*d + a*b), a*a - b*b - c*c + d*d]]
+s = 10 ** r.uniform(-3, 3)
+t = [1000 * s * r.uniform(-1, 1) for _ in range(3)]
+def move(p):
+    return "%.17g %.17g %.17g" % tuple(s * sum(R[i][j] * p[j] for j in range(3)) + t[i] for i in range(3))
+def rewrite(path, is_obj):
+    out = []
+    for line in open(path):
+        w = line.split()
+        if is_obj and w and w[0] == "v":
+            out.append("v " + move([float(x) for x in w[1:4]]) + "\n")
+        elif not is_obj and w and not line.startswith("#"):
+            out.append(move([float(x) for x in w[:3]]) + "\n")
+        else:
+            out.append(line)
+    open(path, "w").writelines(out)
+rewrite(cloud, False)
+rewrite(gt, True)
+PY
+  fi
   if [ -n "${SHUFFLE:-}" ]; then
     python3 - "$OUT/$name.xyz" "$SHUFFLE" <<'PY'
 import random, sys

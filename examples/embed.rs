@@ -4,8 +4,8 @@
 //! stray points, reconstructed with the shipped weights).
 //!
 //! The same calls build with `--no-default-features` (no `rayon`) and for
-//! `wasm32-unknown-unknown`: the library itself touches no file, clock or thread pool
-//! beyond what the `parallel` feature brings.
+//! `wasm32-unknown-unknown`: the library itself reads and writes no file, and starts
+//! threads only with the `parallel` feature.
 
 use point2quad::pipeline::model::Model;
 use point2quad::pipeline::reconstruct::{reconstruct, reconstruct_observed, ReconstructConfig};

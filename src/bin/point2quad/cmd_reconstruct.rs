@@ -50,10 +50,10 @@ OPTIONS:
                           [the shipped weights]
     --svg PREVIEW.svg     also write a shaded SVG picture of the result
     --drop-unused         leave the points no face uses (noise, strays, duplicates) out
-                          of the output; the kept points stay in input order, so the
-                          output's vertex i is the i-th point some face uses (default:
-                          every input point is written, unused ones as isolated
-                          vertices, so indices match the input)
+                          of the output; the kept points stay in input order, then
+                          the vertices hole filling added (default: every input point
+                          is written, unused ones as isolated vertices, so indices
+                          match the input)
     --rounds N            run at most the first N of the model's refinement rounds,
                           0 to 8: the probabilities the model refined with N rounds
                           gives (default: all; the shipped weights have 6)

@@ -1,4 +1,4 @@
-//! Candidate-coverage diagnostics behind the README's "what we measured on the way"
+//! Candidate-coverage diagnostics behind "What we measured on the way" in docs/DETAILS.md
 //! (issue 2) and the loss decomposition of issue 6. Prints tables; asserts nothing
 //! (it is a measurement tool, not a test). `train/` only, or a folder you name:
 //!

@@ -1,5 +1,5 @@
 //! Embedding point2quad as a library: points in memory, a quad mesh back, no file I/O.
-//! The README's library section shows this file; `cargo test` compiles it, and
+//! The README's library section points here; `cargo test` compiles it, and
 //! `cargo run --release --example embed` runs it (a torus's quad-grid vertices plus a few
 //! stray points, reconstructed with the shipped weights).
 //!

@@ -23,7 +23,7 @@ for f in "$DIR"/*.obj "$DIR"/*.off "$DIR"/*.ply; do
   ref=$f
   gtarg=()
   if [ -n "${SYNTH_ARGS:-}${POSE:-}" ]; then ref=$OUT/$name.gt.obj; gtarg=(--gt "$ref"); fi
-  "$BIN" synth --from "$f" --noise "$NOISE" --seed 1 -o "$OUT/$name.xyz" "${gtarg[@]}" ${SYNTH_ARGS:-} 2>/dev/null
+  "$BIN" synth --from "$f" --noise "$NOISE" --seed 1 -o "$OUT/$name.xyz" ${gtarg[@]+"${gtarg[@]}"} ${SYNTH_ARGS:-} 2>/dev/null
   if [ -n "${POSE:-}" ]; then
     python3 - "$OUT/$name.xyz" "$ref" "$POSE" "$name" <<'PY'
 import math, random, sys

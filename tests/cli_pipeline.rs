@@ -755,16 +755,21 @@ fn reconstruct_second_pass_option() {
 /// `reconstruct --drop-unused`: the output holds only the points some face uses, in
 /// input order, with the same faces (compared by their corners' coordinates) as the
 /// default output, whose unused points (noise, a duplicate, a far outlier) are isolated
-/// vertices; `eval` scores both alike; with `--no-postprocess` too.
+/// vertices; `eval` scores both alike; with `--no-postprocess` too, and with
+/// `--watertight`, whose added vertices follow the kept points.
 #[test]
 fn reconstruct_drop_unused_leaves_out_isolated_vertices() {
     let s = Scratch::new("drop_unused");
-    let cloud = s.p("cloud.xyz");
-    ok(&["synth", "--shape", "torus", "-o", &cloud, "--noise", "0.1", "--seed", "5"]);
-    // A duplicate of the first point and a far outlier, both unused by any face.
-    let text = std::fs::read_to_string(&cloud).unwrap();
-    let first = text.lines().find(|l| !l.starts_with('#') && !l.trim().is_empty()).unwrap().to_string();
-    std::fs::write(&cloud, format!("{text}{first}\n1e9 1e9 1e9\n")).unwrap();
+    // A noisy cloud plus a duplicate of its first point and a far outlier, both unused by
+    // any face; returns the cloud's point count.
+    let make = |cloud: &str, shape: &str, seed: &str| -> usize {
+        ok(&["synth", "--shape", shape, "-o", cloud, "--noise", "0.1", "--seed", seed]);
+        let text = std::fs::read_to_string(cloud).unwrap();
+        let mut lines = text.lines().filter(|l| !l.starts_with('#') && !l.trim().is_empty());
+        let first = lines.next().unwrap().to_string();
+        std::fs::write(cloud, format!("{text}{first}\n1e9 1e9 1e9\n")).unwrap();
+        lines.count() + 3
+    };
     let read = |m: &str| point2quad::io::mesh_io::read_mesh(Path::new(m)).unwrap().to_quads().unwrap();
     let corners = |q: &point2quad::mesh::poly::QuadMesh| {
         let mut f: Vec<Vec<[u64; 3]>> = q
@@ -775,10 +780,27 @@ fn reconstruct_drop_unused_leaves_out_isolated_vertices() {
         f.sort();
         f
     };
-    for extra in [&[][..], &["--no-postprocess"][..]] {
+    let torus = s.p("torus.xyz");
+    let n_torus = make(&torus, "torus", "5");
+    // For --watertight, the first random shape whose closing adds vertices.
+    let holed = s.p("holed.xyz");
+    let probe = s.p("probe.obj");
+    let n_holed = ["1", "2", "3", "4", "5", "6", "7", "8", "9", "10", "11", "12"]
+        .iter()
+        .map(|seed| make(&holed, "random", seed))
+        .find(|&n| {
+            ok(&["reconstruct", &holed, "-o", &probe, "--watertight"]);
+            read(&probe).vertices.len() > n
+        })
+        .expect("no random shape among 12 seeds whose closing adds vertices");
+    for (cloud, n_points, extra) in [
+        (&torus, n_torus, &[][..]),
+        (&torus, n_torus, &["--no-postprocess"][..]),
+        (&holed, n_holed, &["--watertight"][..]),
+    ] {
         let (full, compact) = (s.p("full.obj"), s.p("compact.obj"));
-        ok(&[&["reconstruct", &cloud, "-o", &full][..], extra].concat());
-        let out = ok(&[&["reconstruct", &cloud, "-o", &compact, "--drop-unused"][..], extra].concat());
+        ok(&[&["reconstruct", cloud, "-o", &full][..], extra].concat());
+        let out = ok(&[&["reconstruct", cloud, "-o", &compact, "--drop-unused"][..], extra].concat());
         let (f, c) = (read(&full), read(&compact));
         let mut used = vec![false; f.vertices.len()];
         f.quads.iter().flatten().for_each(|&v| used[v as usize] = true);
@@ -788,6 +810,9 @@ fn reconstruct_drop_unused_leaves_out_isolated_vertices() {
         let kept: Vec<[f64; 3]> =
             f.vertices.iter().zip(&used).filter(|(_, u)| **u).map(|(v, _)| *v).collect();
         assert_eq!(c.vertices, kept, "{extra:?}");
+        // Vertices the post-process or the closing added come last, all of them.
+        let added = f.vertices.len() - n_points;
+        assert_eq!(c.vertices[c.vertices.len() - added..], f.vertices[n_points..], "{extra:?}");
         let mut c_used = vec![false; c.vertices.len()];
         c.quads.iter().flatten().for_each(|&v| c_used[v as usize] = true);
         assert!(c_used.iter().all(|u| *u), "{extra:?}: an isolated vertex is left");

@@ -39,8 +39,8 @@ no face uses stay as isolated vertices, unless --drop-unused), then any vertices
 filling added.
 Duplicate and near-duplicate points count once (faces use the first of each group),
 and far outliers (more than 10,000 times the cloud's radius away) are left out; both
-are reported and stay in the output as isolated vertices. The order of the points does
-not matter: any order gives the same faces.
+are reported and stay in the output as isolated vertices (unless --drop-unused). The
+order of the points does not matter: any order gives the same faces.
 
 OPTIONS:
     -o, --output OUT      output mesh; format from the extension (required)
@@ -509,11 +509,16 @@ pub fn run(argv: &[String]) -> Result<()> {
     if rep.faces == 0 {
         crate::output::stderr(&format!(
             "reconstruct: warning: no faces: {} holds no surface the model recognises \
-             ({} candidates, {} predicted real{}); the output has the points only{}\n",
+             ({} candidates, {} predicted real{}); {}{}\n",
             input.display(),
             rep.candidates,
             rep.predicted,
             best_hint(rep.predicted, rep.best_probability),
+            if drop_unused {
+                "the output is empty (--drop-unused)"
+            } else {
+                "the output has the points only"
+            },
             off_default_candidates(&cfg.candidates)
         ));
     }
@@ -657,7 +662,7 @@ pub fn hygiene_notes(cmd: &str, input: &std::path::Path, points: &[[f64; 3]], h:
         crate::output::stderr(&format!(
             "{cmd}: warning: {}: {} point(s) lie closer together than the normalised frame resolves \
              (their 8 nearest neighbours within 1e-6 of the cloud's radius: f32 precision), so \
-             they are left out (isolated in the output) and their part's faces are lost; the first is point {i} \
+             they are left out (no face uses them) and their part's faces are lost; the first is point {i} \
              (counting from 0) at {:?}. The cloud spans too many orders of magnitude (parts far \
              apart, or far points beside a small bulk): reconstruct its parts separately\n",
             input.display(),

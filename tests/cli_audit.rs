@@ -1053,3 +1053,180 @@ fn eight_cube_corners_give_the_six_faces() {
         }
     }
 }
+
+// ---- Session 41's audit ----------------------------------------------------------
+
+/// Session 41's audit: an output path ending with `/` passed the early check, so the
+/// first output (`-o`) was renamed into place before the second's (`--svg`, `--gt`)
+/// rename failed; `reconstruct -o X --model X` replaced the weights with the mesh; and
+/// `--k 3` alone was warned about as "--k 3 … differ".
+#[test]
+fn a_folder_named_output_and_a_weights_file_as_output_are_refused() {
+    let dir = Scratch::new("audit41_out");
+    let cloud = dir.write("c.xyz", &xyz(&cube_cloud(1.0)));
+    let out = dir.p("out.obj");
+    let weights = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/point2quad-default.p2qm"))
+        .expect("test: shipped weights");
+    let w_obj = dir.write("w.obj", &weights);
+    let w_svg = dir.write("w.svg", &weights);
+    let before = dir.entries();
+    let svg_slash = format!("{}/", dir.p("p.svg"));
+    let gt_slash = format!("{}/", dir.p("g.obj"));
+    let c2 = dir.p("c2.xyz");
+    let cases: Vec<(Vec<&str>, i32, Vec<&str>)> = vec![
+        (vec!["reconstruct", &cloud, "-o", &out, "--svg", &svg_slash], 1, vec![&svg_slash, "names a folder"]),
+        (vec!["reconstruct", &cloud, "-o", &svg_slash], 2, vec![&svg_slash]),
+        (vec!["synth", "-o", &c2, "--gt", &gt_slash], 1, vec![&gt_slash, "names a folder"]),
+        (vec!["reconstruct", &cloud, "-o", &w_obj, "--model", &w_obj], 2, vec!["is the input file", &w_obj]),
+        (
+            vec!["reconstruct", &cloud, "-o", &out, "--model", &w_svg, "--svg", &w_svg],
+            2,
+            vec!["is the input file", &w_svg],
+        ),
+    ];
+    for (args, code, needles) in &cases {
+        assert_fails(&p2q(args), *code, needles, &format!("{args:?}"));
+        assert_eq!(dir.entries(), before, "{args:?}: files left behind");
+    }
+    assert!(std::fs::read(&w_obj).expect("test: read") == weights, "w.obj replaced");
+    assert!(std::fs::read(&w_svg).expect("test: read") == weights, "w.svg replaced");
+    // A weights file of another name is fine as a model beside those outputs.
+    assert_ok(&p2q(&["reconstruct", &cloud, "-o", &out, "--model", &w_obj]), "--model w.obj");
+    assert!(faces(&out).len() > 100);
+    // One candidate option off its default: "differs", and "try without it".
+    let line: Vec<[f64; 3]> = (0..40).map(|i| [i as f64, 2.0 * i as f64, 0.0]).collect();
+    let line = dir.write("line.xyz", &xyz(&line));
+    let err = assert_ok(&p2q(&["reconstruct", &line, "-o", &out, "--k", "3"]), "line --k 3");
+    assert!(
+        err.contains("--k 3 (default 20) differs from the defaults") && err.contains("try without it"),
+        "{err}"
+    );
+}
+
+/// Session 41's audit: a lone `\r` in a file with `\n` line ends joined two lines, so
+/// the second point was read as extra columns of the first and silently dropped, and
+/// the output's vertices were no longer the input's.
+#[test]
+fn a_lone_carriage_return_ends_a_line() {
+    let dir = Scratch::new("audit41_cr");
+    let pts = cube_cloud(1.0);
+    let text = String::from_utf8(xyz(&pts)).expect("test: utf-8");
+    // The second line end becomes a lone `\r`, the third `\r\n`.
+    let mut mixed = String::new();
+    for (i, line) in text.lines().enumerate() {
+        mixed.push_str(line);
+        mixed.push_str(match i {
+            1 => "\r",
+            2 => "\r\n",
+            _ => "\n",
+        });
+    }
+    let cloud = dir.write("mixed.xyz", mixed.as_bytes());
+    let out = dir.p("out.obj");
+    assert_ok(&p2q(&["reconstruct", &cloud, "-o", &out]), "mixed line ends");
+    let written = std::fs::read_to_string(&out).expect("test: read");
+    let vertices: Vec<&str> = written.lines().filter(|l| l.starts_with("v ")).collect();
+    assert_eq!(vertices.len(), pts.len(), "points lost");
+    let plain = dir.write("plain.xyz", &xyz(&pts));
+    let out2 = dir.p("plain.obj");
+    assert_ok(&p2q(&["reconstruct", &plain, "-o", &out2]), "plain");
+    assert_eq!(written, std::fs::read_to_string(&out2).expect("test: read"), "not the plain file's mesh");
+}
+
+/// Session 41's audit: `dataset` named a mesh `syn_00000_cube.obj` like the synthetic
+/// sample beside it, which it then overwrote (the index listed the name twice); `--out`
+/// naming a file said only "File exists"; `refine` with every sample held out blamed
+/// `--val-fraction`, after scoring them all; `train --resume` of a finished run with
+/// another `--out` wrote nothing there and exited 0.
+#[test]
+fn dataset_names_refine_splits_and_finished_resumes() {
+    let dir = Scratch::new("audit41_ds");
+    let first = dir.p("first");
+    assert_ok(&p2q(&["dataset", "--out", &first, "--synthetic", "1", "--seed", "1"]), "dataset");
+    // The index's first column, past its `#` header.
+    let index = |d: &str| -> Vec<String> {
+        let text = std::fs::read_to_string(format!("{d}/index.txt")).expect("test: index");
+        text.lines()
+            .filter(|l| !l.starts_with('#'))
+            .map(|l| l.split('\t').next().unwrap_or("").to_string())
+            .collect()
+    };
+    let syn = index(&first)[0].trim_end_matches(".p2qs").to_string();
+    assert!(syn.starts_with("syn_"), "{syn}");
+    std::fs::create_dir(dir.path("meshes")).expect("test: mkdir");
+    std::fs::write(dir.path(&format!("meshes/{syn}.obj")), grid_obj()).expect("test: write");
+    let data = dir.p("data");
+    let meshes = dir.p("meshes");
+    assert_ok(
+        &p2q(&["dataset", "--out", &data, "--meshes", &meshes, "--synthetic", "1", "--seed", "1"]),
+        "dataset with a clashing mesh",
+    );
+    let names = index(&data);
+    let files = std::fs::read_dir(&data)
+        .expect("test: list")
+        .filter(|e| e.as_ref().expect("test: entry").path().extension().is_some_and(|x| x == "p2qs"));
+    assert_eq!(files.count(), 2, "{names:?}");
+    assert!(
+        names.contains(&format!("{syn}.p2qs")) && names.contains(&format!("mesh_{syn}.p2qs")),
+        "{names:?}"
+    );
+    // The synthetic sample is the one the first run wrote, byte for byte.
+    let a = std::fs::read(format!("{first}/{syn}.p2qs")).expect("test: read");
+    assert!(
+        a == std::fs::read(format!("{data}/{syn}.p2qs")).expect("test: read"),
+        "synthetic sample replaced"
+    );
+    // `--out` naming a file.
+    let file = dir.write("file", b"x");
+    assert_fails(
+        &p2q(&["dataset", "--out", &file, "--synthetic", "1"]),
+        1,
+        &[&file, "not a folder"],
+        "--out FILE",
+    );
+    // Train one epoch, then: every sample held out; a finished resume to a new name.
+    let m = dir.p("m.p2qm");
+    let train = [
+        "train",
+        "--data",
+        &data,
+        "--out",
+        &m,
+        "--epochs",
+        "1",
+        "--max-candidates",
+        "500",
+        "--val-fraction",
+        "0",
+    ];
+    assert_ok(&p2q(&train), "train");
+    let all = format!("{syn},mesh_{syn}");
+    let r = p2q(&["refine", "--data", &data, "--model", &m, "--out", &dir.p("r.p2qm"), "--hold-out", &all]);
+    assert_fails(
+        &r,
+        2,
+        &["every sample fell into validation", "--hold-out (2 name(s))"],
+        "refine, all held out",
+    );
+    assert!(!stderr(&r).contains("scored"), "scored before refusing: {}", stderr(&r));
+    let r = p2q(&[
+        "train",
+        "--data",
+        &data,
+        "--out",
+        &dir.p("t.p2qm"),
+        "--hold-out",
+        &all,
+        "--val-fraction",
+        "0",
+    ]);
+    assert_fails(&r, 2, &["every sample fell into validation", "--hold-out"], "train, all held out");
+    let new = dir.p("new.p2qm");
+    let err = assert_ok(
+        &p2q(&["train", "--data", &data, "--out", &new, "--resume", &format!("{m}.ckpt")]),
+        "resume",
+    );
+    assert!(err.contains("nothing to train") && err.contains(&new), "{err}");
+    assert!(std::fs::read(&new).expect("test: new.p2qm written") == std::fs::read(&m).expect("test: read"));
+    assert!(std::path::Path::new(&format!("{new}.ckpt")).is_file(), "no checkpoint beside {new}");
+}

@@ -159,3 +159,37 @@ proptest! {
         prop_assert_eq!(back.faces, expect_faces);
     }
 }
+
+/// Re-joins `text`'s lines with line ends drawn from `ends` in turn: `\n`, `\r\n`, a
+/// lone `\r`, or `\r\r\n` (a doubled conversion).
+fn mixed_line_ends(text: &str, ends: &[u8]) -> String {
+    let mut out = String::new();
+    for (i, line) in text.lines().enumerate() {
+        out.push_str(line);
+        out.push_str(["\n", "\r\n", "\r", "\r\r\n"][ends[i % ends.len()] as usize % 4]);
+    }
+    out
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// Session 41's audit: a lone `\r` in a file with `\n` line ends joined two lines
+    /// (the second point's values were read as extra columns of the first and dropped).
+    /// Any mix of line ends now reads every point, in every text format.
+    #[test]
+    fn any_mix_of_line_ends_reads_every_point(pts in points(), ends in prop::collection::vec(0u8..4, 1..6)) {
+        let mut xyz = Vec::new();
+        write_xyz(&mut xyz, &pts).expect("in memory");
+        let text = mixed_line_ends(&String::from_utf8(xyz).expect("utf-8"), &ends);
+        let back = parse_points(text.as_bytes(), PointFormat::Xyz, "m.xyz").map_err(|e| TestCaseError::fail(e.to_string()))?;
+        prop_assert_eq!(bits(&back), bits(&pts));
+        let mesh = PolyMesh { vertices: pts.clone(), faces: vec![] };
+        for format in [MeshFormat::Obj, MeshFormat::Off] {
+            let buf = encode(&mesh, format, point2quad::io::mesh_io::PlyEncoding::Ascii);
+            let text = mixed_line_ends(&String::from_utf8(buf).expect("utf-8"), &ends);
+            let back = parse_mesh(text.as_bytes(), format, "m").map_err(|e| TestCaseError::fail(format!("{format:?}: {e}")))?;
+            prop_assert_eq!(bits(&back.vertices), bits(&pts), "{:?}", format);
+        }
+    }
+}

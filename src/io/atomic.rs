@@ -93,6 +93,13 @@ pub fn commit_all(staged: Vec<Staged>) -> Result<()> {
 /// Creates a new temporary file next to `path`. `create_new` makes the name
 /// exclusive even against other processes; on a clash the next name is tried.
 fn create_temp(path: &Path) -> Result<(PathBuf, File)> {
+    // `dir/name/` has the components of `dir/name`, but the rename onto it fails (not a
+    // folder): refused before anything is written.
+    let text = path.as_os_str().to_string_lossy();
+    if text.ends_with('/') || text.ends_with(std::path::MAIN_SEPARATOR) {
+        let msg = "not a file path (it ends with a path separator)";
+        return Err(Error::io(path, io::Error::new(io::ErrorKind::InvalidInput, msg)));
+    }
     let file_name = path
         .file_name()
         .ok_or_else(|| Error::io(path, io::Error::new(io::ErrorKind::InvalidInput, "not a file path")))?;
@@ -246,6 +253,21 @@ mod tests {
             .collect();
         v.sort();
         v
+    }
+
+    /// A target ending with a separator names a folder: refused before anything is
+    /// written (it used to be written as a temporary file and fail only at the rename,
+    /// after the outputs staged before it were committed).
+    #[test]
+    fn a_target_ending_with_a_separator_is_refused_before_writing() {
+        let d = scratch_dir("slash");
+        let target = format!("{}/p.svg/", d.display());
+        let err = prepare_atomic(Path::new(&target), |w| w.write_all(b"x").map_err(|e| Error::io("x", e)))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("p.svg/") && err.contains("separator"), "{err}");
+        assert!(entries(&d).is_empty(), "{:?}", entries(&d));
+        fs::remove_dir_all(&d).unwrap();
     }
 
     #[test]

@@ -368,7 +368,16 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                 el.props.push(Prop { name: pn, kind });
             }
             b"end_header" => break,
-            other => return Err(Error::parse(name, ln, format!("unknown header line '{}'", show(other)))),
+            other => {
+                // A line of numbers is the data: the header's `end_header` is missing.
+                let data = other.first().is_some_and(|b| b.is_ascii_digit() || b"+-.".contains(b));
+                let hint = if data {
+                    " (data before 'end_header'? the header must end with an 'end_header' line)"
+                } else {
+                    ""
+                };
+                return Err(Error::parse(name, ln, format!("unknown header line '{}'{hint}", show(other))));
+            }
         }
     }
     let (format, _) = format.ok_or_else(|| Error::parse(name, ln, "header has no 'format' line"))?;
@@ -998,6 +1007,8 @@ mod tests {
             ("plx\n".into(), "t.ply:1: not a PLY file"),
             ("ply\nformat ascii 1.0 junk\nend_header\n".into(), "t.ply:2: unexpected 'junk' after the format's version"),
             ("ply\nformat ascii 1.0\n".into(), "t.ply:3: header not terminated"),
+            // `end_header` left out: the first data line is named as such (session 41).
+            ("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n0 0 0\n".into(), "t.ply:7: unknown header line '0' (data before 'end_header'?"),
             ("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n0 0\n".into(), "t.ply:3: element vertex has no property 'z'"),
             ("ply\nformat ascii 1.0\nelement vertex 1\nproperty blob x\nend_header\n".into(), "t.ply:4: unknown property type 'blob'"),
             (format!("{head}0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n"), "t.ply:13: face 0: vertex index 3 out of range"),

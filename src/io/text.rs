@@ -46,17 +46,39 @@ impl<'a> Iterator for Lines<'a> {
     }
 }
 
-/// The text with classic Mac line endings (a lone `\r`) turned into `\n`, when it
-/// has no `\n` at all; otherwise the text as is. Without this a CR-only file reads
-/// as one long line, and the formats that ignore extra columns (OBJ, .xyz) would
-/// silently keep its first vertex only. Only for text formats: never for a file
-/// that may hold binary data.
+/// The text with classic Mac line endings (a lone `\r`) turned into `\n`. Without this
+/// a CR-only file reads as one long line, and the formats that ignore extra columns
+/// (OBJ, .xyz) would silently keep its first vertex only; in a file that mixes line
+/// ends (a line pasted from a Mac editor into an LF file) the two lines around a lone
+/// `\r` were read as one, the second's values taken for extra columns of the first.
+/// With no `\n` at all, every `\r` is a line end. Otherwise a `\r` is one when the
+/// next byte is neither `\n` nor `\r`: `\r\n` and the `\r\r\n` of a doubled conversion
+/// stay as they are (the `\r`s before the `\n` are read as blanks), so their line
+/// numbers do not move. The text as is (borrowed) when nothing changes. Only for text
+/// formats: never for a file that may hold binary data.
 pub(crate) fn cr_lines(bytes: &[u8]) -> std::borrow::Cow<'_, [u8]> {
-    if find_byte(bytes, b'\n').is_none() && find_byte(bytes, b'\r').is_some() {
-        std::borrow::Cow::Owned(bytes.iter().map(|&b| if b == b'\r' { b'\n' } else { b }).collect())
-    } else {
-        std::borrow::Cow::Borrowed(bytes)
+    if find_byte(bytes, b'\n').is_none() {
+        if find_byte(bytes, b'\r').is_none() {
+            return std::borrow::Cow::Borrowed(bytes);
+        }
+        return std::borrow::Cow::Owned(bytes.iter().map(|&b| if b == b'\r' { b'\n' } else { b }).collect());
     }
+    let lone = |j: usize| !matches!(bytes.get(j + 1), Some(b'\n' | b'\r'));
+    let mut from = 0;
+    let first = loop {
+        match find_byte(&bytes[from..], b'\r') {
+            None => return std::borrow::Cow::Borrowed(bytes),
+            Some(k) if lone(from + k) => break from + k,
+            Some(k) => from += k + 1,
+        }
+    };
+    let mut out = bytes.to_vec();
+    for (j, b) in out.iter_mut().enumerate().skip(first) {
+        if *b == b'\r' && lone(j) {
+            *b = b'\n';
+        }
+    }
+    std::borrow::Cow::Owned(out)
 }
 
 /// Position of the first `needle` in `hay`. Eight bytes at a time (the classic
@@ -270,7 +292,14 @@ mod tests {
     #[test]
     fn cr_only_text_becomes_lines() {
         assert_eq!(&*cr_lines(b"a\rb\r"), b"a\nb\n");
-        assert_eq!(&*cr_lines(b"a\r\nb\r"), b"a\r\nb\r");
+        // Mixed line ends: a lone `\r` between `\n` lines ends its line (it joined two
+        // lines before); `\r\n` and `\r\r\n` stay as they are.
+        assert_eq!(&*cr_lines(b"a\r\nb\r"), b"a\r\nb\n");
+        assert_eq!(&*cr_lines(b"a\nb\rc\nd\r\ne\r\r\nf"), b"a\nb\nc\nd\r\ne\r\r\nf");
+        assert!(matches!(cr_lines(b"a\r\nb\r\r\nc\n"), std::borrow::Cow::Borrowed(_)));
+        let text = cr_lines(b"1 2 3\n4 5 6\r7 8 9\r\n");
+        let lines: Vec<(usize, &[u8])> = Lines::new(&text).collect();
+        assert_eq!(lines, vec![(1, &b"1 2 3"[..]), (2, b"4 5 6"), (3, b"7 8 9")]);
         assert!(matches!(cr_lines(b"a b"), std::borrow::Cow::Borrowed(_)));
     }
 

@@ -43,7 +43,9 @@ OPTIONS:
                       quads around its centroid (`synth --triangle-split`; not in the
                       default weights' recipe: `make train-trisplit` uses 32; at most
                       100000)
-    --meshes DIR      every .obj/.off/.ply file directly in DIR (sorted by name)
+    --meshes DIR      every .obj/.off/.ply file directly in DIR (sorted by name);
+                      sample NAME is the file's stem (`mesh_` before a stem that
+                      starts with `syn_`, the synthetic samples' names)
     --coarsen F[,F2,...]
                       also a coarse copy of each mesh of --meshes, sample NAME@c:
                       random chords (strips of quads) collapsed until at most F of
@@ -358,6 +360,13 @@ pub fn run(argv: &[String]) -> Result<()> {
         )));
     }
     let made_out = !out.exists();
+    if !made_out && !out.is_dir() {
+        // `create_dir_all` said only "File exists (os error 17)".
+        return Err(Error::io(
+            &out,
+            std::io::Error::other("exists and is not a folder (--out names the folder the samples go to)"),
+        ));
+    }
     if !made_out && out.is_dir() {
         // `train` reads every sample in the folder: old ones would join the new set.
         let old = std::fs::read_dir(&out)
@@ -584,12 +593,18 @@ fn load_quads(path: &Path) -> std::result::Result<QuadMesh, String> {
     Ok(mesh)
 }
 
-/// A file stem made safe as a sample (and file) name.
+/// A file stem made safe as a sample (and file) name. The synthetic samples' names
+/// (`syn_<index>_<family>`, `syn_tri_…`) are kept for them: a mesh whose stem starts
+/// with `syn_` is named `mesh_syn_…` (session 41's audit: `syn_00000_cube.obj` in
+/// `--meshes` beside `--synthetic 1` overwrote that sample, and the index listed the
+/// name twice).
 fn sanitize(stem: &str) -> String {
     let s: String =
         stem.chars().map(|c| if c.is_alphanumeric() || "-_.".contains(c) { c } else { '_' }).collect();
     if s.is_empty() {
         "mesh".into()
+    } else if s.starts_with("syn_") {
+        format!("mesh_{s}")
     } else {
         s
     }

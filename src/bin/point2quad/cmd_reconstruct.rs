@@ -402,6 +402,15 @@ pub fn run(argv: &[String]) -> Result<()> {
         Some(m) => load_models(cmd, m)?,
         None => vec![(SHIPPED_NAME.to_string(), Model::shipped()?)],
     };
+    // Nor may an output replace a weights file (`--model w.obj -o w.obj` did).
+    if a.value("--model").is_some() {
+        for (name, _) in &models {
+            crate::output::check_not_input(cmd, &out, Path::new(name))?;
+            if let Some(svg) = svg {
+                crate::output::check_not_input(cmd, svg, Path::new(name))?;
+            }
+        }
+    }
     let members: Vec<&Model> = models.iter().map(|(_, m)| m).collect();
     // Progress on long work: a large cloud's stages are named as they end.
     let long = wants_progress(a.switch("--progress"), points.len());
@@ -605,9 +614,10 @@ fn off_default_candidates(c: &point2quad::pipeline::candidates::CandidateConfig)
     if off.is_empty() {
         return String::new();
     }
+    let (verb, pronoun) = if off.len() == 1 { ("differs", "it") } else { ("differ", "them") };
     format!(
-        "; {} differ from the defaults that the shipped weights and `point2quad dataset` use, \
-         which can alone explain it: try without",
+        "; {} {verb} from the defaults that the shipped weights and `point2quad dataset` use, \
+         which can alone explain it: try without {pronoun}",
         off.join(" and ")
     )
 }

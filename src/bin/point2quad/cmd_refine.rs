@@ -214,6 +214,10 @@ pub fn run(argv: &[String]) -> Result<()> {
         check_samples(&samples, m)?;
     }
     split.check_names(cmd, samples.iter().map(|s| s.name.as_str()))?;
+    // Before the samples are scored, which takes a while.
+    if samples.iter().all(|s| split.is_validation(&s.name)) {
+        return Err(split.nothing_to_train(cmd));
+    }
     let fin = base.config().face_in();
     if precise {
         let t = std::time::Instant::now();
@@ -258,7 +262,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         t0.elapsed().as_secs_f64()
     );
     if tr.is_empty() {
-        return Err(Error::Usage("refine: every sample fell into validation; lower --val-fraction".into()));
+        return Err(split.nothing_to_train(cmd));
     }
     let t1 = std::time::Instant::now();
     let no_val = va.is_empty();

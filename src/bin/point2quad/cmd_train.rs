@@ -229,6 +229,26 @@ impl Split {
             || self.fold.is_some_and(|(i, k)| fold_of(parent, k) == i)
     }
 
+    /// The error for a split that leaves nothing to train on, naming what put every
+    /// sample into validation (it blamed `--val-fraction` alone, also when `--hold-out`
+    /// had named every sample).
+    pub(crate) fn nothing_to_train(&self, cmd: &str) -> Error {
+        let mut why = Vec::new();
+        if self.fraction > 0.0 {
+            why.push(format!("--val-fraction {}", self.fraction));
+        }
+        if !self.names.is_empty() {
+            why.push(format!("--hold-out ({} name(s))", self.names.len()));
+        }
+        if let Some((i, k)) = self.fold {
+            why.push(format!("--fold {i}/{k}"));
+        }
+        Error::Usage(format!(
+            "{cmd}: every sample fell into validation ({}); nothing is left to train on: lower --val-fraction or hold out fewer samples",
+            why.join(", ")
+        ))
+    }
+
     /// Error naming the `--hold-out` names that no sample of `samples` carries (a typo
     /// would otherwise silently train on the mesh meant to be held out).
     pub(crate) fn check_names<'a>(&self, cmd: &str, samples: impl Iterator<Item = &'a str>) -> Result<()> {
@@ -698,7 +718,7 @@ pub fn run(argv: &[String]) -> Result<()> {
         }
     }
     if tr.is_empty() {
-        return Err(Error::Usage("train: every sample fell into validation; lower --val-fraction".into()));
+        return Err(split.nothing_to_train("train"));
     }
     // With noise draws an epoch reads one draw of each sample: count the first draws'
     // candidates, and every draw's beside them.
@@ -766,6 +786,8 @@ pub fn run(argv: &[String]) -> Result<()> {
         let weights: Checkpoint = m.to_checkpoint(None);
         checkpoint::save(&out, &weights)
     };
+    // Kept for a resume that finds its run already complete (below).
+    let resumed_state = resume.as_ref().filter(|st| st.epoch >= cfg.epochs as u64).cloned();
     let reports = train(&mut model, &tr, &va, &cfg, resume, &mut progress, &mut save)?;
     if let Some(r) = reports.last() {
         let val = if no_val {
@@ -780,7 +802,18 @@ pub fn run(argv: &[String]) -> Result<()> {
             ckpt_path.display()
         );
     } else {
-        say!("train: already at epoch {start_epoch} of {}; nothing to do", cfg.epochs);
+        // The run is complete, but `--out` may name another file than the one it wrote
+        // (`--resume old.p2qm.ckpt --out new.p2qm`): the weights and the checkpoint go
+        // there too, so that the output the command names exists when it exits 0.
+        if let Some(st) = &resumed_state {
+            save(&model, st)?;
+        }
+        say!(
+            "train: already at epoch {start_epoch} of {}; nothing to train; weights in {}, checkpoint in {}",
+            cfg.epochs,
+            out.display(),
+            ckpt_path.display()
+        );
     }
     Ok(())
 }

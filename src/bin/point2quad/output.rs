@@ -60,14 +60,20 @@ pub fn stderr(text: &str) {
 ///
 /// # Errors
 /// `Io` naming `path`: "no such folder" when its parent is missing, "not a folder" when
-/// the parent is a file, "is a directory" when `path` is one, "not a regular file" when
-/// it exists as a device, pipe or socket.
+/// the parent is a file, "names a folder" when it ends with a separator, "is a directory"
+/// when `path` is one, "not a regular file" when it exists as a device, pipe or socket.
 pub fn check_output_path(path: &std::path::Path) -> Result<()> {
     let parent = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => std::path::Path::new("."),
     };
     let fail = |kind: ErrorKind, msg: &str| Err(Error::io(path, std::io::Error::new(kind, msg)));
+    // `p.svg/` names a folder: the path's components drop the slash, so the temporary
+    // file was written as `p.svg` and only the final rename failed, after the outputs
+    // committed before it had replaced their targets.
+    if ends_with_separator(path) {
+        return fail(ErrorKind::Other, "ends with a path separator, so it names a folder; give a file name");
+    }
     match std::fs::metadata(parent) {
         Err(e) if e.kind() == ErrorKind::NotFound => {
             return fail(ErrorKind::NotFound, &format!("no such folder {}", parent.display()))
@@ -96,6 +102,12 @@ pub fn check_output_path(path: &std::path::Path) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Whether the path's text ends with a separator (`/`, and `\\` on Windows).
+fn ends_with_separator(path: &std::path::Path) -> bool {
+    let s = path.as_os_str().to_string_lossy();
+    s.ends_with('/') || s.ends_with(std::path::MAIN_SEPARATOR)
 }
 
 /// Refuses an output that is the input file itself (the same file under any name):

@@ -81,21 +81,27 @@ fn faces_waiting_on_each_other_in_the_suite_go_in() {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
-    /// `QuadMesh::without_unused` against its definition, brute force: the kept indices
-    /// are exactly the used ones, ascending; each kept vertex is its original; each quad
-    /// maps back to the original quad corner for corner.
+    /// `QuadMesh::without_unused` and `without_unused_from(start)` against their
+    /// definition, brute force: the kept indices are exactly those below `start` and the
+    /// used ones, ascending; each kept vertex is its original; each quad maps back to the
+    /// original quad corner for corner.
     #[test]
     fn without_unused_matches_brute_force(
         n in 1usize..40,
         raw in prop::collection::vec(prop::array::uniform4(0usize..1000), 0..30),
+        start in prop::option::of(0usize..45),
     ) {
         use point2quad::mesh::poly::QuadMesh;
         let vertices: Vec<[f64; 3]> = (0..n).map(|i| [i as f64, (i * i) as f64, -(i as f64)]).collect();
         let quads: Vec<[u32; 4]> = raw.iter().map(|q| q.map(|v| (v % n) as u32)).collect();
         let m = QuadMesh { vertices: vertices.clone(), quads: quads.clone() };
-        let (c, kept) = m.without_unused();
+        let (c, kept) = match start {
+            None => m.without_unused(),
+            Some(s) => m.without_unused_from(s),
+        };
+        let s = start.unwrap_or(0);
         let used: Vec<u32> =
-            (0..n as u32).filter(|v| quads.iter().any(|q| q.contains(v))).collect();
+            (0..n as u32).filter(|v| (*v as usize) < s || quads.iter().any(|q| q.contains(v))).collect();
         prop_assert_eq!(&kept, &used);
         prop_assert_eq!(c.vertices.len(), kept.len());
         for (k, &orig) in kept.iter().enumerate() {

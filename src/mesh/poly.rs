@@ -61,7 +61,15 @@ impl QuadMesh {
     /// order and corner order, renumbered. An index out of range is the caller's bug
     /// and panics, as indexing does.
     pub fn without_unused(&self) -> (QuadMesh, Vec<u32>) {
+        self.without_unused_from(0)
+    }
+
+    /// As [`QuadMesh::without_unused`], but the first `start` vertices all stay, used or
+    /// not: only vertices from `start` on that no quad uses are dropped (the vertices a
+    /// hole filling added whose quads a later step took out, after the input's points).
+    pub fn without_unused_from(&self, start: usize) -> (QuadMesh, Vec<u32>) {
         let mut new_index = vec![u32::MAX; self.vertices.len()];
+        new_index.iter_mut().take(start).for_each(|s| *s = 0);
         for q in &self.quads {
             for &v in q {
                 new_index[v as usize] = 0;

@@ -557,9 +557,13 @@ fn has_repeat(vs: &[u32]) -> bool {
 /// fan of quads around a new vertex at its centroid; no face changes when they do not
 /// all go in, and nothing at all when a quad of the fan would be degenerate.
 fn fan(hm: &mut HalfedgeMesh, pos: &mut Vec<[f64; 3]>, vs: &[u32]) {
-    if !fan_is_sound(pos, vs) {
+    // The fan from the loop's second vertex uses the other half of its corners as the
+    // quads' middle corners: where a corner of the first is degenerate (three loop
+    // vertices on a line), the second often is not (session 41's audit).
+    let rotated: Vec<u32> = vs.iter().skip(1).chain(vs.first()).copied().collect();
+    let Some(vs) = [vs, &rotated[..]].into_iter().find(|vs| fan_is_sound(pos, vs)) else {
         return;
-    }
+    };
     let quads = fan_quads(hm, pos, vs);
     // When they do not go in, the vertex stays, isolated (no face uses it).
     add_all(hm, &quads);
@@ -786,6 +790,34 @@ mod tests {
                 assert!(pos[first_new..].iter().flatten().all(|x| x.is_finite()));
             }
         }
+    }
+
+    /// Session 41's audit: a loop whose fan from its first vertex has a degenerate quad
+    /// (here `(v0, v1, v2, c)`: its diagonals `v2 − v0` and `c − v1` are parallel) was
+    /// left open; the fan from its second vertex is sound and closes it.
+    #[test]
+    fn the_fan_starts_at_the_second_vertex_when_the_first_gives_a_degenerate_quad() {
+        // A hexagon with a notch at v1; its vertex mean c = (1.1, 2) lies level with v1.
+        let mut pos: Vec<[f64; 3]> = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 2.0, 0.0],
+            [2.0, 0.0, 0.0],
+            [2.0, 3.0, 0.0],
+            [1.6, 4.0, 0.0],
+            [0.0, 3.0, 0.0],
+        ];
+        let vs = [0u32, 1, 2, 3, 4, 5];
+        assert!(!fan_is_sound(&pos, &vs), "the premise: the first fan has a degenerate quad");
+        let mut hm = HalfedgeMesh::from_quads(6, &[]).unwrap();
+        fan(&mut hm, &mut pos, &vs);
+        assert_eq!(hm.n_faces(), 3);
+        validate(&hm).unwrap();
+        let quads = hm.to_quad_mesh(&pos).unwrap().quads;
+        for q in &quads {
+            assert!(!is_degenerate_quad(&q.map(|v| pos[v as usize])), "{q:?}");
+            assert!(q.contains(&6), "{q:?}: not round the new centre");
+        }
+        assert!(quads.iter().any(|q| q[0] == 1), "{quads:?}: not the fan from v1");
     }
 
     /// A fan of quads over a convex `n`-gon (n even) round a centre vertex (index n)

@@ -165,8 +165,10 @@ pub struct ReconstructReport {
     /// Vertices added by the post-process (hole filling, the closing) and by
     /// `--watertight`'s closing ([`ReconstructReport::watertight`] counts those apart).
     pub vertices_added: usize,
-    /// Points left out as exact or near duplicates of an earlier point (in the output
-    /// they are isolated vertices; faces use the first of each group).
+    /// Points left out as exact or near duplicates of another (in the output they are
+    /// isolated vertices; faces use one point of each group: of exact copies the first
+    /// in input order, of near-duplicates the first in coordinate order, so that any
+    /// order of the input gives the same faces).
     pub duplicates: usize,
     /// Points left out as far outliers (see [`far_outliers`]), isolated in the output.
     pub outliers: usize,
@@ -365,6 +367,10 @@ pub fn reconstruct_observed(
             mesh = closed;
             report.watertight = Some(wr);
         }
+        // A vertex the hole filling added whose quads a later step took out (the seal,
+        // the untangle, the unfold) would stay in the output, isolated (session 41's
+        // audit): only the input's points stay whether used or not.
+        let mesh = mesh.without_unused_from(u).0;
         report.vertices_added = mesh.vertices.len() - u;
         report.postprocess = Some(pp);
         let mut vertices = points.to_vec();
@@ -745,17 +751,11 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
     if merge_share > 0.0 {
         let roots = near_duplicate_roots_with(&knn, &reach, merge_share);
         if roots.iter().enumerate().any(|(i, &r)| r as usize != i) {
-            // Each group keeps its first point in input order (its faces use it), listed
-            // where the group's root stands: in coordinate order.
-            let mut first = (0..roots.len()).collect::<Vec<usize>>();
-            for (i, &r) in roots.iter().enumerate() {
-                if distinct[i] < distinct[first[r as usize]] {
-                    first[r as usize] = i;
-                }
-            }
-            let mut keep: Vec<usize> =
-                (0..roots.len()).filter(|&i| roots[i] as usize == i).map(|r| first[r]).collect();
-            keep.sort_unstable();
+            // Each group keeps its root, its first point in coordinate order (its faces
+            // use it). It kept its first in input order until session 41, whose audit
+            // found that the one choice left to the input's order: a shuffled cloud of
+            // near-duplicates gave another mesh (141 of 684 faces on one cloud).
+            let keep: Vec<usize> = (0..roots.len()).filter(|&i| roots[i] as usize == i).collect();
             if keep.len() < 4 {
                 // Not "distinct": the points are distinct, the merge made them one.
                 return Err(Error::invalid(format!(

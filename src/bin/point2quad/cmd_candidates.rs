@@ -36,7 +36,8 @@ OPTIONS:
     -h, --help       this text
 
 The input is cleaned as `reconstruct` cleans it: exact and near-duplicate points
-count once (the first of each group; its copies are in no candidate), and far outliers
+count once (one point of each group: of exact copies the first in input order, of
+near-duplicates the first in coordinate order; the others are in no candidate), and far outliers
 (more than 10,000 times the cloud's radius away) are left out; both are noted on stderr.
 A summary (points, candidates, candidates per point, time) goes to stderr.
 ";

@@ -37,7 +37,9 @@ wherever they are, else the first three), at any scale, pose or offset. The outp
 mesh's vertices are the input points, written back exactly and in input order (points
 no face uses stay as isolated vertices, unless --drop-unused), then any vertices hole
 filling added.
-Duplicate and near-duplicate points count once (faces use the first of each group),
+Duplicate and near-duplicate points count once (faces use one point of each group:
+of exact copies the first in input order, of near-duplicates the first in coordinate
+order),
 and far outliers (more than 10,000 times the cloud's radius away) are left out; both
 are reported and stay in the output as isolated vertices (unless --drop-unused). The
 order of the points does not matter: any order gives the same faces.
@@ -132,8 +134,10 @@ OPTIONS:
                           (new vertices on the edges it crosses), then every even loop
                           is filled, with new vertices where needed. For closed
                           objects: an open surface's border is closed too, unless
-                          it is longer than --watertight-max-loop (default: off;
-                          session 32)
+                          it is longer than --watertight-max-loop. A loop that only
+                          degenerate quads could close (its points on a line, or on
+                          one another) stays open, counted as `left open` in the
+                          summary (default: off; session 32)
     --watertight-max-loop N  with --watertight, loops of more than N edges stay open
                           (0: none does) [0]
 ";

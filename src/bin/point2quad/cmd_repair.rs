@@ -47,7 +47,8 @@ OPTIONS:
                            the edges it crosses; earlier faces count as more believed),
                            even loops filled, with new vertices where needed; also the
                            border of an open surface unless it is longer than
-                           --watertight-max-loop (session 32)
+                           --watertight-max-loop; a loop that only degenerate quads
+                           could close stays open, counted as `left open` (session 32)
     --watertight-max-loop N  with --watertight, loops of more than N edges stay open
                            (0: none does) [0]
     -h, --help             this help
@@ -128,6 +129,9 @@ pub fn run(argv: &[String]) -> Result<()> {
         out = m;
         closed = Some(r);
     }
+    // Added vertices no quad uses any more (a later step took their quads out) are
+    // dropped; the input's stay, used or not (session 41's audit).
+    let out = out.without_unused_from(quads.vertices.len()).0;
     write_mesh(Path::new(output), &PolyMesh::from(&out))?;
 
     say!("repair {input} -> {output}");

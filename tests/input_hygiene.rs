@@ -174,9 +174,7 @@ fn near_copies_give_the_faces_of_the_cloud() {
         p[0].total_cmp(&q[0]).then(p[1].total_cmp(&q[1])).then(p[2].total_cmp(&q[2])).is_lt()
     };
     let expect = |i: u32| {
-        if i >= n {
-            i + n
-        } else if first(&both[(i + n) as usize], &both[i as usize]) {
+        if i >= n || first(&both[(i + n) as usize], &both[i as usize]) {
             i + n
         } else {
             i

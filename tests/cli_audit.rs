@@ -1072,10 +1072,13 @@ fn a_folder_named_output_and_a_weights_file_as_output_are_refused() {
     let before = dir.entries();
     let svg_slash = format!("{}/", dir.p("p.svg"));
     let gt_slash = format!("{}/", dir.p("g.obj"));
+    let obj_slash = format!("{}/", dir.p("o.obj"));
+    let svg_dot = format!("{}/.", dir.p("p.svg"));
     let c2 = dir.p("c2.xyz");
     let cases: Vec<(Vec<&str>, i32, Vec<&str>)> = vec![
         (vec!["reconstruct", &cloud, "-o", &out, "--svg", &svg_slash], 1, vec![&svg_slash, "names a folder"]),
-        (vec!["reconstruct", &cloud, "-o", &svg_slash], 2, vec![&svg_slash]),
+        (vec!["reconstruct", &cloud, "-o", &obj_slash], 1, vec![&obj_slash, "names a folder"]),
+        (vec!["reconstruct", &cloud, "-o", &out, "--svg", &svg_dot], 1, vec![&svg_dot, "names a folder"]),
         (vec!["synth", "-o", &c2, "--gt", &gt_slash], 1, vec![&gt_slash, "names a folder"]),
         (vec!["reconstruct", &cloud, "-o", &w_obj, "--model", &w_obj], 2, vec!["is the input file", &w_obj]),
         (

@@ -146,8 +146,11 @@ proptest! {
         let span = pts.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max) - pts.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min);
         for _ in 0..copies {
             let q = pts[rng.below(pts.len())];
-            // Far below the merge share (1e-3 of the spacing) and never an exact copy.
-            let e = span * 1e-9 * (1.0 + rng.f64());
+            // Far below the merge share (1e-3 of the spacing) and never an exact copy;
+            // either side of the point, so the copy is first in coordinate order about
+            // half the time.
+            let sign = if rng.below(2) == 0 { 1.0 } else { -1.0 };
+            let e = sign * span * 1e-9 * (1.0 + rng.f64());
             pts.push([q[0] + e, q[1] - e, q[2]]);
         }
         let mut order: Vec<usize> = (0..pts.len()).collect();

@@ -90,14 +90,27 @@ pub fn commit_all(staged: Vec<Staged>) -> Result<()> {
     staged.into_iter().try_for_each(Staged::commit)
 }
 
+/// Whether `path`'s text names a folder whatever exists: it ends with a separator (`/`,
+/// and `\\` on Windows), or its last component is `.` or `..`. [`Path::file_name`] reads
+/// `p.svg/` and `p.svg/.` as `p.svg`, so a write would make the temporary file and fail
+/// only at the rename (session 41's audit).
+pub fn names_a_folder(path: &Path) -> bool {
+    let text = path.as_os_str().to_string_lossy();
+    let seps: &[char] = &['/', std::path::MAIN_SEPARATOR];
+    if text.ends_with(seps) {
+        return true;
+    }
+    let last = text.rsplit(seps).next().unwrap_or("");
+    last == "." || last == ".."
+}
+
 /// Creates a new temporary file next to `path`. `create_new` makes the name
 /// exclusive even against other processes; on a clash the next name is tried.
 fn create_temp(path: &Path) -> Result<(PathBuf, File)> {
-    // `dir/name/` has the components of `dir/name`, but the rename onto it fails (not a
-    // folder): refused before anything is written.
-    let text = path.as_os_str().to_string_lossy();
-    if text.ends_with('/') || text.ends_with(std::path::MAIN_SEPARATOR) {
-        let msg = "not a file path (it ends with a path separator)";
+    // `dir/name/` and `dir/name/.` have the components of `dir/name`, but the rename onto
+    // them fails (not a folder): refused before anything is written.
+    if names_a_folder(path) {
+        let msg = "not a file path (it ends with a path separator, `.` or `..`)";
         return Err(Error::io(path, io::Error::new(io::ErrorKind::InvalidInput, msg)));
     }
     let file_name = path
@@ -261,12 +274,17 @@ mod tests {
     #[test]
     fn a_target_ending_with_a_separator_is_refused_before_writing() {
         let d = scratch_dir("slash");
-        let target = format!("{}/p.svg/", d.display());
-        let err = prepare_atomic(Path::new(&target), |w| w.write_all(b"x").map_err(|e| Error::io("x", e)))
-            .unwrap_err()
-            .to_string();
-        assert!(err.contains("p.svg/") && err.contains("separator"), "{err}");
-        assert!(entries(&d).is_empty(), "{:?}", entries(&d));
+        for tail in ["p.svg/", "p.svg/.", "p.svg/.."] {
+            let target = format!("{}/{tail}", d.display());
+            let err =
+                prepare_atomic(Path::new(&target), |w| w.write_all(b"x").map_err(|e| Error::io("x", e)))
+                    .unwrap_err()
+                    .to_string();
+            assert!(err.contains(tail) && err.contains("separator"), "{err}");
+            assert!(entries(&d).is_empty(), "{:?}", entries(&d));
+        }
+        assert!(!names_a_folder(Path::new("a/b.obj")) && !names_a_folder(Path::new("a/.b")));
+        assert!(names_a_folder(Path::new(".")) && names_a_folder(Path::new("..")));
         fs::remove_dir_all(&d).unwrap();
     }
 

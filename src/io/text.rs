@@ -51,10 +51,10 @@ impl<'a> Iterator for Lines<'a> {
 /// (OBJ, .xyz) would silently keep its first vertex only; in a file that mixes line
 /// ends (a line pasted from a Mac editor into an LF file) the two lines around a lone
 /// `\r` were read as one, the second's values taken for extra columns of the first.
-/// With no `\n` at all, every `\r` is a line end. Otherwise a `\r` is one when the
-/// next byte is neither `\n` nor `\r`: `\r\n` and the `\r\r\n` of a doubled conversion
-/// stay as they are (the `\r`s before the `\n` are read as blanks), so their line
-/// numbers do not move. The text as is (borrowed) when nothing changes. Only for text
+/// With no `\n` at all, every `\r` is a line end. Otherwise a `\r` is one unless a
+/// `\n` follows it, directly or after one more `\r`: `\r\n` and the `\r\r\n` of a
+/// doubled conversion stay as they are (the `\r`s before the `\n` are read as blanks), so
+/// their line numbers do not move, and `\r\r` between lines is two line ends. The text as is (borrowed) when nothing changes. Only for text
 /// formats: never for a file that may hold binary data.
 pub(crate) fn cr_lines(bytes: &[u8]) -> std::borrow::Cow<'_, [u8]> {
     if find_byte(bytes, b'\n').is_none() {
@@ -63,7 +63,11 @@ pub(crate) fn cr_lines(bytes: &[u8]) -> std::borrow::Cow<'_, [u8]> {
         }
         return std::borrow::Cow::Owned(bytes.iter().map(|&b| if b == b'\r' { b'\n' } else { b }).collect());
     }
-    let lone = |j: usize| !matches!(bytes.get(j + 1), Some(b'\n' | b'\r'));
+    let lone = |j: usize| match bytes.get(j + 1) {
+        Some(b'\n') => false,
+        Some(b'\r') => bytes.get(j + 2) != Some(&b'\n'),
+        _ => true,
+    };
     let mut from = 0;
     let first = loop {
         match find_byte(&bytes[from..], b'\r') {
@@ -297,6 +301,7 @@ mod tests {
         assert_eq!(&*cr_lines(b"a\r\nb\r"), b"a\r\nb\n");
         assert_eq!(&*cr_lines(b"a\nb\rc\nd\r\ne\r\r\nf"), b"a\nb\nc\nd\r\ne\r\r\nf");
         assert!(matches!(cr_lines(b"a\r\nb\r\r\nc\n"), std::borrow::Cow::Borrowed(_)));
+        assert_eq!(&*cr_lines(b"a\r\rb\nc"), b"a\n\nb\nc");
         let text = cr_lines(b"1 2 3\n4 5 6\r7 8 9\r\n");
         let lines: Vec<(usize, &[u8])> = Lines::new(&text).collect();
         assert_eq!(lines, vec![(1, &b"1 2 3"[..]), (2, b"4 5 6"), (3, b"7 8 9")]);

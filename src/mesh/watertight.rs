@@ -27,8 +27,9 @@
 //!    then the quadrangulation again on what is left; a loop still open is cut by
 //!    chords into pieces of at most 16 edges ([`WatertightConfig::split_long_loops`],
 //!    session 33) and each piece gets a fan around one new vertex at its centroid:
-//!    quads `(v₀, v₁, v₂, c), (v₂, v₃, v₄, c), …`, which closes any even loop that does
-//!    not pass through a vertex twice.
+//!    quads `(v₀, v₁, v₂, c), (v₂, v₃, v₄, c), …` (or `(v₁, v₂, v₃, c), …` when the
+//!    first has a degenerate quad), which closes any even loop but one that only
+//!    degenerate quads could close (its points on a line, or on one another).
 //! 4. The added vertices are smoothed (guarded Laplacian steps), then each is moved by
 //!    a pattern search that raises the worst scaled Jacobian of its quads
 //!    ([`WatertightConfig::maximin_sweeps`], session 33).
@@ -119,10 +120,11 @@ pub struct WatertightReport {
     pub longest_loop: usize,
     /// Quads the filling added (the rescued candidates not counted).
     pub quads_added: usize,
-    /// Vertices added (strip splits, hole filling and fans).
+    /// Vertices added (strip splits, hole filling and fans) that some face of the result
+    /// uses; the others are not in the result.
     pub vertices_added: usize,
     /// Boundary loops still open at the end: those longer than the bound, and any the
-    /// filling could not close (through a vertex twice).
+    /// filling could not close (only degenerate quads would: both fans unsound).
     pub loops_left: usize,
 }
 
@@ -236,8 +238,11 @@ pub fn close_all(
     report.loops_filled = loops_before.saturating_sub(open_loops(&hm, limit).len());
     report.loops_left = hm.boundary_loops().len();
     report.quads_added = hm.n_faces() - faces_before - report.rescued;
-    report.vertices_added = pos.len() - mesh.vertices.len();
-    Ok((hm.to_quad_mesh(&pos)?, report))
+    // A fan that did not go in leaves its centre with no face: only the added vertices
+    // some face uses stay, and only those are counted (session 41).
+    let closed = hm.to_quad_mesh(&pos)?.without_unused_from(mesh.vertices.len()).0;
+    report.vertices_added = closed.vertices.len() - mesh.vertices.len();
+    Ok((closed, report))
 }
 
 /// Loops up to this many edges that the quadrangulation cannot close get a fan
@@ -258,7 +263,7 @@ enum Piece {
 /// edge of the mesh already, of least length per loop step on the shorter side, and
 /// each piece is closed the same way; else a fan round a new vertex at its centroid.
 /// The pieces share the chords, so together they close the loop. `None` when a piece
-/// can only be closed by a degenerate quad ([`fan_is_sound`]; session 37: a flat
+/// can only be closed by a degenerate quad ([`sound_fan`]; session 37: a flat
 /// sheet's straight border cut into collinear pieces gave quads of no area); nothing
 /// is added to the mesh either way ([`commit_pieces`] does that).
 fn split_and_fill(
@@ -309,7 +314,19 @@ fn split_and_fill(
             return Some(pieces);
         }
     }
-    fan_is_sound(pos, vs).then(|| vec![Piece::Fan(vs.to_vec())])
+    sound_fan(pos, vs).map(|vs| vec![Piece::Fan(vs)])
+}
+
+/// The loop `vs` from its first vertex, or from its second when the fan from the first
+/// has a degenerate quad ([`fan_is_sound`]): the quads' middle corners are then the other
+/// half of the loop's vertices (session 41's audit: a loop with three vertices on a line
+/// was left open). `None` when both fans have a degenerate quad.
+fn sound_fan(pos: &[[f64; 3]], vs: &[u32]) -> Option<Vec<u32>> {
+    if fan_is_sound(pos, vs) {
+        return Some(vs.to_vec());
+    }
+    let rotated: Vec<u32> = vs.iter().skip(1).chain(vs.first()).copied().collect();
+    fan_is_sound(pos, &rotated).then_some(rotated)
 }
 
 /// Adds the fans' centres of `pieces` to `hm` and `pos` and returns every piece's quads.
@@ -554,17 +571,14 @@ fn has_repeat(vs: &[u32]) -> bool {
 }
 
 /// Closes the even loop `vs` (from-vertices of its boundary half-edges, in order) by a
-/// fan of quads around a new vertex at its centroid; no face changes when they do not
-/// all go in, and nothing at all when a quad of the fan would be degenerate.
+/// fan of quads around a new vertex at its centroid, from its first vertex or, when that
+/// fan has a degenerate quad, from its second; no face changes when they do not all go
+/// in, and nothing at all when both fans have a degenerate quad.
 fn fan(hm: &mut HalfedgeMesh, pos: &mut Vec<[f64; 3]>, vs: &[u32]) {
-    // The fan from the loop's second vertex uses the other half of its corners as the
-    // quads' middle corners: where a corner of the first is degenerate (three loop
-    // vertices on a line), the second often is not (session 41's audit).
-    let rotated: Vec<u32> = vs.iter().skip(1).chain(vs.first()).copied().collect();
-    let Some(vs) = [vs, &rotated[..]].into_iter().find(|vs| fan_is_sound(pos, vs)) else {
+    let Some(vs) = sound_fan(pos, vs) else {
         return;
     };
-    let quads = fan_quads(hm, pos, vs);
+    let quads = fan_quads(hm, pos, &vs);
     // When they do not go in, the vertex stays, isolated (no face uses it).
     add_all(hm, &quads);
 }

@@ -3,9 +3,10 @@
 //! features, classify them (with the point encoder's features of their corners when
 //! the model has one), post-process the faces predicted real into a manifold
 //! pure-quad mesh. The output's vertices are the input points, bit-identical and in
-//! order (unused ones stay as isolated vertices, so indices match the input), then any
-//! vertices the hole filling added (mapped back to the input's frame). Exact duplicate
-//! points are one point to the pipeline: faces use the first occurrence.
+//! order (unused ones stay as isolated vertices, so indices match the input), then the
+//! vertices the hole filling added that some face uses (mapped back to the input's
+//! frame). Exact duplicate points are one point to the pipeline: faces use the first
+//! occurrence; a group of near-duplicates, its first point in coordinate order.
 
 use crate::mesh::halfedge::corner_set;
 use crate::mesh::poly::QuadMesh;
@@ -36,8 +37,8 @@ pub struct ReconstructConfig {
     /// Post-process settings.
     pub postprocess: PostprocessConfig,
     /// Near-duplicate merging: two points closer than this share of the distance from
-    /// either to its 8th nearest other point are one point (the first in input order
-    /// is used; see [`near_duplicate_roots`]). A cloud appended to a copy of itself
+    /// either to its 8th nearest other point are one point (the group's first in
+    /// coordinate order is used, since session 41; see [`near_duplicate_roots`]). A cloud appended to a copy of itself
     /// moved by a rounding error otherwise fills every neighbourhood with near-copies
     /// and the surface is lost. Default 0.001: real quad meshes have vertex pairs at
     /// 0.0011 (`femhead_quad` of `train/`) and 0.015 (`qm_monkey`) of that distance
@@ -163,7 +164,9 @@ pub struct ReconstructReport {
     /// Faces in the output.
     pub faces: usize,
     /// Vertices added by the post-process (hole filling, the closing) and by
-    /// `--watertight`'s closing ([`ReconstructReport::watertight`] counts those apart).
+    /// `--watertight`'s closing ([`ReconstructReport::watertight`] counts those apart)
+    /// that some output face uses: an added vertex whose faces a later step took out is
+    /// not in the output (session 41).
     pub vertices_added: usize,
     /// Points left out as exact or near duplicates of another (in the output they are
     /// isolated vertices; faces use one point of each group: of exact copies the first
@@ -191,8 +194,9 @@ pub struct ReconstructReport {
 
 /// Point cloud → pure-quad manifold mesh with `model`. The order of `points` does not
 /// matter (since session 30): any order of the same points gives the same faces on the
-/// same points, and the same added vertices (up to which of a group of near-duplicates
-/// the faces use: the first given).
+/// same points, and the same added vertices (near-duplicates too since session 41: a
+/// group's faces use its first point in coordinate order; of exact copies, which are
+/// the same point, the first given).
 ///
 /// # Errors
 /// `Error::InvalidInput` for fewer than 4 (distinct) points, non-finite coordinates
@@ -614,8 +618,9 @@ fn merge_passes(
 /// A cloud made ready for the pipeline by [`prepare_cloud`].
 #[derive(Clone, Debug)]
 pub struct PreparedCloud {
-    /// Input index of each point the pipeline works on (the first in input order of each
-    /// group of duplicates or near-duplicates; far outliers left out), in coordinate order
+    /// Input index of each point the pipeline works on (of each group of exact duplicates
+    /// the first in input order, of near-duplicates the first in coordinate order; far
+    /// outliers left out), in coordinate order
     /// (by x, then y, then z; since session 30: every step from the outliers on reads the
     /// points in that order), so that no stage depends on the input's order.
     pub distinct: Vec<u32>,

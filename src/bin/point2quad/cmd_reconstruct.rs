@@ -35,14 +35,14 @@ INPUT is a point cloud (.xyz/.txt/.pts/.csv, .ply, .obj or .off; only positions 
 read; a first line of column names is a header: columns named x, y, z are read
 wherever they are, else the first three), at any scale, pose or offset. The output
 mesh's vertices are the input points, written back exactly and in input order (points
-no face uses stay as isolated vertices, unless --drop-unused), then any vertices hole
-filling added.
+no face uses stay as isolated vertices, unless --drop-unused), then the vertices hole
+filling added that some face uses.
 Duplicate and near-duplicate points count once (faces use one point of each group:
 of exact copies the first in input order, of near-duplicates the first in coordinate
-order),
-and far outliers (more than 10,000 times the cloud's radius away) are left out; both
-are reported and stay in the output as isolated vertices (unless --drop-unused). The
-order of the points does not matter: any order gives the same faces.
+order), and far outliers (more than 10,000 times the cloud's radius away) are left
+out; both are reported and stay in the output as isolated vertices (unless
+--drop-unused). The order of the points does not matter: any order gives the same
+faces.
 
 OPTIONS:
     -o, --output OUT      output mesh; format from the extension (required)
@@ -53,7 +53,8 @@ OPTIONS:
     --svg PREVIEW.svg     also write a shaded SVG picture of the result
     --drop-unused         leave the points no face uses (noise, strays, duplicates) out
                           of the output; the kept points stay in input order, then
-                          the vertices hole filling added (default: every input point
+                          the vertices hole filling added that some face uses
+                          (default: every input point
                           is written, unused ones as isolated vertices, so indices
                           match the input)
     --rounds N            run at most the first N of the model's refinement rounds,

@@ -28,7 +28,7 @@ agree); (c) greedy hole filling, then what is left: two loops with an odd number
 edges (which quads cannot close) are merged by removing the face or two between them,
 and loops of at most 40 edges are split into quads over their own vertices. Closed
 components are then turned outward. Output vertices are the input's, in order and
-unchanged, plus any the hole filling adds.
+unchanged, plus those the hole filling adds that some face uses.
 
 OPTIONS:
     -o FILE                output mesh (.obj .ply .off), written atomically
@@ -131,7 +131,9 @@ pub fn run(argv: &[String]) -> Result<()> {
     }
     // Added vertices no quad uses any more (a later step took their quads out) are
     // dropped; the input's stay, used or not (session 41's audit).
+    let before = out.vertices.len();
     let out = out.without_unused_from(quads.vertices.len()).0;
+    let unused_dropped = before - out.vertices.len();
     write_mesh(Path::new(output), &PolyMesh::from(&out))?;
 
     say!("repair {input} -> {output}");
@@ -184,8 +186,13 @@ pub fn run(argv: &[String]) -> Result<()> {
         );
     }
     let loops_out = closed.as_ref().map_or(rep.boundary_loops_out, |w| w.loops_left);
+    let dropped_note = if unused_dropped > 0 {
+        format!(" ({unused_dropped} added vertices no face uses any more left out)")
+    } else {
+        String::new()
+    };
     say!(
-        "  output: {} vertices, {} quads, {} boundary loops",
+        "  output: {} vertices{dropped_note}, {} quads, {} boundary loops",
         out.vertices.len(),
         out.quads.len(),
         loops_out

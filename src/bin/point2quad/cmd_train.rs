@@ -244,7 +244,7 @@ impl Split {
             why.push(format!("--fold {i}/{k}"));
         }
         Error::Usage(format!(
-            "{cmd}: every sample fell into validation ({}); nothing is left to train on: lower --val-fraction or hold out fewer samples",
+            "{cmd}: every sample fell into validation ({}); nothing is left to train on: lower --val-fraction, hold out fewer samples or leave out --fold",
             why.join(", ")
         ))
     }

@@ -68,11 +68,14 @@ pub fn check_output_path(path: &std::path::Path) -> Result<()> {
         _ => std::path::Path::new("."),
     };
     let fail = |kind: ErrorKind, msg: &str| Err(Error::io(path, std::io::Error::new(kind, msg)));
-    // `p.svg/` names a folder: the path's components drop the slash, so the temporary
+    // `p.svg/` (or `p.svg/.`) names a folder: the path's components drop the slash, so the temporary
     // file was written as `p.svg` and only the final rename failed, after the outputs
     // committed before it had replaced their targets.
-    if ends_with_separator(path) {
-        return fail(ErrorKind::Other, "ends with a path separator, so it names a folder; give a file name");
+    if point2quad::io::atomic::names_a_folder(path) {
+        return fail(
+            ErrorKind::Other,
+            "ends with a path separator, `.` or `..`, so it names a folder; give a file name",
+        );
     }
     match std::fs::metadata(parent) {
         Err(e) if e.kind() == ErrorKind::NotFound => {
@@ -102,12 +105,6 @@ pub fn check_output_path(path: &std::path::Path) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// Whether the path's text ends with a separator (`/`, and `\\` on Windows).
-fn ends_with_separator(path: &std::path::Path) -> bool {
-    let s = path.as_os_str().to_string_lossy();
-    s.ends_with('/') || s.ends_with(std::path::MAIN_SEPARATOR)
 }
 
 /// Refuses an output that is the input file itself (the same file under any name):

@@ -64,11 +64,14 @@ def main():
         cand = os.path.join(work, name + ".cand.txt")
         subprocess.run([binary, "synth", "--from", os.path.join(mesh_dir, mesh), "--noise", noise,
                         "--seed", "1", "-o", gt_cloud, "--gt", gt, "--quiet"], check=True)
-        if open(gt_cloud, "rb").read() != open(cloud, "rb").read():
+        with open(gt_cloud, "rb") as a, open(cloud, "rb") as b:
+            same = a.read() == b.read()
+        if not same:
             sys.exit(f"{cloud}: not the cloud `synth --from {mesh} --noise {noise} --seed 1` writes")
         subprocess.run([binary, "candidates", cloud, "-o", cand, "--quiet"], check=True)
         G, O = faces_of(gt), faces_of(pred)
-        C = {frozenset(map(int, l.split())) for l in open(cand) if l.strip()}
+        with open(cand) as f:
+            C = {frozenset(map(int, l.split())) for l in f if l.strip()}
         gt_keys = {frozenset(f) for f in G}
         out_keys = {frozenset(f) for f in O}
         gt_edges = {frozenset(e) for f in G for e in edges(f)}

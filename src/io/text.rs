@@ -53,9 +53,10 @@ impl<'a> Iterator for Lines<'a> {
 /// `\r` were read as one, the second's values taken for extra columns of the first.
 /// With no `\n` at all, every `\r` is a line end. Otherwise a `\r` is one unless a
 /// `\n` follows it, directly or after one more `\r`: `\r\n` and the `\r\r\n` of a
-/// doubled conversion stay as they are (the `\r`s before the `\n` are read as blanks), so
-/// their line numbers do not move, and `\r\r` between lines is two line ends. The text as is (borrowed) when nothing changes. Only for text
-/// formats: never for a file that may hold binary data.
+/// doubled conversion stay as they are (the `\r`s before the `\n` are read as blanks),
+/// so their line numbers do not move, and `\r\r` between lines is two line ends. The
+/// text as is (borrowed) when nothing changes. Only for text formats: never for a file
+/// that may hold binary data.
 pub(crate) fn cr_lines(bytes: &[u8]) -> std::borrow::Cow<'_, [u8]> {
     if find_byte(bytes, b'\n').is_none() {
         if find_byte(bytes, b'\r').is_none() {

@@ -38,8 +38,9 @@ pub struct ReconstructConfig {
     pub postprocess: PostprocessConfig,
     /// Near-duplicate merging: two points closer than this share of the distance from
     /// either to its 8th nearest other point are one point (the group's first in
-    /// coordinate order is used, since session 41; see [`near_duplicate_roots`]). A cloud appended to a copy of itself
-    /// moved by a rounding error otherwise fills every neighbourhood with near-copies
+    /// coordinate order is used, since session 41; see [`near_duplicate_roots`]). A cloud
+    /// appended to a copy of itself moved by a rounding error otherwise fills every
+    /// neighbourhood with near-copies
     /// and the surface is lost. Default 0.001: real quad meshes have vertex pairs at
     /// 0.0011 (`femhead_quad` of `train/`) and 0.015 (`qm_monkey`) of that distance
     /// (sliver edges), and merging one drops every face at the merged vertex. 0 merges
@@ -707,11 +708,15 @@ pub fn prepare_cloud(points: &[[f64; 3]], merge_share: f32) -> Result<PreparedCl
             // A bulk of at most NEAR_K points has a stray among its 8 nearest, so the
             // resolution test cannot see it squeezed (session 41's fuzz: one point at
             // 1e308 beside 4–6 unit points; the merge then made them one): such strays go.
-            let (knn, reach, lost) = resolution(&local);
-            if 2 * lost.len() > local.len() || local.len() - strays.len() <= NEAR_K {
+            if local.len() - strays.len() <= NEAR_K {
                 far = strays;
             } else {
-                resolved = Some((knn, reach, lost));
+                let (knn, reach, lost) = resolution(&local);
+                if 2 * lost.len() > local.len() {
+                    far = strays;
+                } else {
+                    resolved = Some((knn, reach, lost));
+                }
             }
         }
     }

@@ -54,9 +54,8 @@ OPTIONS:
     --drop-unused         leave the points no face uses (noise, strays, duplicates) out
                           of the output; the kept points stay in input order, then
                           the vertices hole filling added that some face uses
-                          (default: every input point
-                          is written, unused ones as isolated vertices, so indices
-                          match the input)
+                          (default: every input point is written, unused ones as
+                          isolated vertices, so indices match the input)
     --rounds N            run at most the first N of the model's refinement rounds,
                           0 to 8: the probabilities the model refined with N rounds
                           gives (default: all; the shipped weights have 6)

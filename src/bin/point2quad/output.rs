@@ -68,9 +68,9 @@ pub fn check_output_path(path: &std::path::Path) -> Result<()> {
         _ => std::path::Path::new("."),
     };
     let fail = |kind: ErrorKind, msg: &str| Err(Error::io(path, std::io::Error::new(kind, msg)));
-    // `p.svg/` (or `p.svg/.`) names a folder: the path's components drop the slash, so the temporary
-    // file was written as `p.svg` and only the final rename failed, after the outputs
-    // committed before it had replaced their targets.
+    // `p.svg/` (or `p.svg/.`) names a folder: the path's components drop the slash, so
+    // the temporary file was written as `p.svg` and only the final rename failed, after
+    // the outputs committed before it had replaced their targets.
     if point2quad::io::atomic::names_a_folder(path) {
         return fail(
             ErrorKind::Other,
